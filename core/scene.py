@@ -1,0 +1,119 @@
+"""SceneData: what the bake needs of a Blender scene, as plain numpy arrays (no bpy references).
+
+Units: metres, world space. Colours are linear Rec.709 RGB.
+Vertices are *shading vertices*: a mesh vertex whose face corners carry different normals (a hard
+edge) is split into one shading vertex per distinct normal, so each has a single normal; the addon
+keeps the map from Blender face corners back to shading vertices for writing results.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+LAMP_POINT, LAMP_SPOT, LAMP_SUN, LAMP_AREA = 0, 1, 2, 3
+SHAPE_RECTANGLE, SHAPE_ELLIPSE = 0, 1
+
+
+@dataclass
+class Lamps:
+    """L lamps, as Blender defines them.
+
+    kind: int32[L], LAMP_POINT / LAMP_SPOT / LAMP_SUN / LAMP_AREA.
+    position: float32[L,3], world position (m).
+    direction: float32[L,3], unit vector the lamp points along (its local −Z); sun: towards the scene.
+    axis_u, axis_v: float32[L,3], unit local X and Y axes in world space (area lamp extent).
+    size: float32[L,2], area: full size along X and Y (m, square/disk repeat it); point/spot: radius
+        (m) in [:,0]; sun: angular diameter (rad) in [:,0].
+    shape: int32[L], area lamps: SHAPE_RECTANGLE or SHAPE_ELLIPSE.
+    power: float32[L,3], colour × power: W for point, spot and area; W/m² (strength) for sun.
+    spot_size: float32[L], full cone angle (rad); spot_blend: float32[L] in [0,1].
+    names: list of L lamp names (for messages).
+    """
+
+    kind: np.ndarray
+    position: np.ndarray
+    direction: np.ndarray
+    axis_u: np.ndarray
+    axis_v: np.ndarray
+    size: np.ndarray
+    shape: np.ndarray
+    power: np.ndarray
+    spot_size: np.ndarray
+    spot_blend: np.ndarray
+    names: list = field(default_factory=list)
+
+    @staticmethod
+    def empty() -> "Lamps":
+        z3 = np.zeros((0, 3), np.float32)
+        return Lamps(np.zeros(0, np.int32), z3, z3.copy(), z3.copy(), z3.copy(),
+                     np.zeros((0, 2), np.float32), np.zeros(0, np.int32), z3.copy(),
+                     np.zeros(0, np.float32), np.zeros(0, np.float32), [])
+
+    @staticmethod
+    def concat(items: list["Lamps"]) -> "Lamps":
+        if not items:
+            return Lamps.empty()
+        out = {}
+        for name in ("kind", "position", "direction", "axis_u", "axis_v", "size", "shape", "power",
+                     "spot_size", "spot_blend"):
+            out[name] = np.concatenate([getattr(x, name) for x in items])
+        return Lamps(**out, names=[n for x in items for n in x.names])
+
+    def __len__(self) -> int:
+        return int(self.kind.shape[0])
+
+
+@dataclass
+class SceneData:
+    """World-space triangles and lamps of a scene.
+
+    positions: float32[V,3] shading-vertex positions (m).
+    normals: float32[V,3] unit shading normals.
+    triangles: int32[T,3] shading-vertex indices, counter-clockwise seen from the front.
+    tri_object: int32[T] index into ``object_names`` of the object each triangle came from.
+    albedo: float32[T,3] diffuse reflectance in [0,1].
+    emission: float32[T,3] emitted radiance (W m⁻² sr⁻¹, Blender's Emission Strength × Color),
+        leaving both faces.
+    lamps: the scene's lamps.
+    object_names: names of the objects (or instances) the triangles came from.
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    triangles: np.ndarray
+    tri_object: np.ndarray
+    albedo: np.ndarray
+    emission: np.ndarray
+    lamps: Lamps
+    object_names: list = field(default_factory=list)
+
+    @property
+    def num_vertices(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def num_triangles(self) -> int:
+        return int(self.triangles.shape[0])
+
+    def triangle_areas(self) -> np.ndarray:
+        """float32[T]: area of each triangle (m²)."""
+        p = self.positions
+        t = self.triangles
+        return 0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1)
+
+    def validate(self) -> None:
+        """Raise ValueError naming the object for NaN / infinite geometry or inconsistent arrays."""
+        v, t = self.num_vertices, self.num_triangles
+        shapes = {"positions": (v, 3), "normals": (v, 3), "triangles": (t, 3), "tri_object": (t,),
+                  "albedo": (t, 3), "emission": (t, 3)}
+        for name, shape in shapes.items():
+            if getattr(self, name).shape != shape:
+                raise ValueError(f"SceneData.{name} has shape {getattr(self, name).shape}, expected {shape}")
+        if t and (self.triangles.min() < 0 or self.triangles.max() >= v):
+            raise ValueError("SceneData.triangles index outside positions")
+        bad_v = ~np.isfinite(self.positions).all(axis=1)
+        if bad_v.any():
+            bad_t = bad_v[self.triangles].any(axis=1)
+            names = sorted({self.object_names[i] for i in np.unique(self.tri_object[bad_t])})
+            raise ValueError(f"non-finite vertex positions in {', '.join(names)}")

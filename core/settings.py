@@ -1,0 +1,61 @@
+"""One dataclass holds every bake setting; the Blender PropertyGroup and the CLI mirror it."""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+METHODS = ("direct", "bruteforce")
+CONTENTS = ("lighting", "combined", "indirect")
+TARGETS = ("vertex_colors",)
+DEVICES = ("auto", "cpu", "cuda")
+
+
+@dataclass
+class Settings:
+    """Bake settings.
+
+    method: ``direct`` (lamps and emissive triangles only) or ``bruteforce`` (all-pairs multi-bounce
+        gather with ray-cast visibility, O(n²), small scenes).
+    content: ``lighting`` (irradiance/π, Cycles DIFFUSE Direct+Indirect without Color),
+        ``combined`` (emission + albedo × lighting) or ``indirect`` (lighting minus direct).
+    target: where results go (``vertex_colors``).
+    attribute: name of the color attribute written (only that exact name is ever overwritten).
+    device: ``auto`` (CUDA when usable, else CPU), ``cpu`` or ``cuda``.
+    light_samples: stratified shadow samples per lamp / emissive triangle and receiver (soft shadows).
+    visibility_rays: rays per element pair in the bruteforce gather (jittered over the sender disk).
+    bounces: maximum number of indirect bounces (bruteforce).
+    tolerance: stop iterating when the largest change of indirect lighting, relative to the largest
+        value, falls below this.
+    max_pairs: memory budget of the bruteforce transport matrix, in element pairs (4 bytes each).
+    seed: random seed of sample jitter (results are deterministic for a given seed).
+    """
+
+    method: str = "bruteforce"
+    content: str = "lighting"
+    target: str = "vertex_colors"
+    attribute: str = "Lighting"
+    device: str = "auto"
+    light_samples: int = 16
+    visibility_rays: int = 4
+    bounces: int = 64
+    tolerance: float = 1e-4
+    max_pairs: int = 64_000_000
+    seed: int = 1
+
+    def validate(self) -> "Settings":
+        """Raise ValueError with a clear message for an out-of-range setting; return self."""
+        for name, allowed in (("method", METHODS), ("content", CONTENTS), ("target", TARGETS),
+                              ("device", DEVICES)):
+            value = getattr(self, name)
+            if value not in allowed:
+                raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {value!r}")
+        if not self.attribute or not self.attribute.strip():
+            raise ValueError("attribute name must not be empty")
+        for name in ("light_samples", "visibility_rays", "bounces", "max_pairs"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, not {getattr(self, name)}")
+        if not 0.0 < self.tolerance < 1.0:
+            raise ValueError(f"tolerance must be in (0, 1), not {self.tolerance}")
+        return self
+
+    def as_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
