@@ -27,6 +27,8 @@ class Settings:
         value, falls below this.
     max_pairs: memory budget of the bruteforce transport matrix, in element pairs (4 bytes each).
     seed: random seed of sample jitter (results are deterministic for a given seed).
+    bake_copy: when an object's modifiers change its vertex count, bake into a new object
+        ``<name>_baked`` holding the evaluated mesh instead of skipping the object with a message.
     """
 
     method: str = "bruteforce"
@@ -40,6 +42,7 @@ class Settings:
     tolerance: float = 1e-4
     max_pairs: int = 64_000_000
     seed: int = 1
+    bake_copy: bool = False
 
     def validate(self) -> "Settings":
         """Raise ValueError with a clear message for an out-of-range setting; return self."""
