@@ -7,16 +7,9 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from .errors import BakeCancelled, BakeError
 from .scene import SceneData
 from .settings import Settings
-
-
-class BakeError(RuntimeError):
-    """A bake that cannot run; the message says why and names the object where there is one."""
-
-
-class BakeCancelled(RuntimeError):
-    """The user cancelled the bake; nothing was written."""
 
 
 ProgressFn = Callable[[str, float], None]

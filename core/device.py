@@ -1,0 +1,84 @@
+"""Device choice and the launch helper that spreads CPU launches over all cores.
+
+Warp runs a CPU launch serially on the calling thread (releasing the GIL), so a large launch is split
+into ranges run by one Python thread per core. Kernels launched through :func:`launch` take the
+offset of their range as the first argument: ``i = wp.tid() + offset``.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import warp as wp
+
+_initialised = False
+
+
+def init_warp() -> None:
+    """Initialise Warp once, quietly."""
+    global _initialised
+    if not _initialised:
+        wp.config.log_level = wp.LOG_WARNING
+        wp.config.verbose = False
+        wp.init()
+        _initialised = True
+
+
+@dataclass(frozen=True)
+class Device:
+    """name: Warp device string ("cpu" or "cuda:0"); threads: CPU threads a launch is split over."""
+
+    name: str
+    threads: int
+
+    @property
+    def is_cuda(self) -> bool:
+        return self.name.startswith("cuda")
+
+
+def select(preference: str = "auto") -> Device:
+    """Pick the device: "cuda" (error if none is usable), "cpu", or "auto" (CUDA when usable)."""
+    init_warp()
+    cuda = wp.get_cuda_device_count() > 0
+    if preference == "cuda" and not cuda:
+        raise RuntimeError("device 'cuda' requested but Warp found no usable CUDA GPU "
+                           "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
+    if preference in ("cuda", "auto") and cuda:
+        return Device("cuda:0", 1)
+    return Device("cpu", max(1, os.cpu_count() or 1))
+
+
+def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
+           on_chunk: Optional[Callable[[float], None]] = None) -> None:
+    """Launch ``kernel`` over ``n`` threads, ``kernel(offset, *inputs)``.
+
+    The range is cut into ``chunks`` consecutive waves (progress and cancellation happen between
+    waves through ``on_chunk(fraction_done)``, which may raise); on the CPU each wave is further
+    split over ``device.threads`` threads.
+    """
+    if n <= 0:
+        return
+    chunks = max(1, min(chunks, n))
+    step = -(-n // chunks)
+    pool = ThreadPoolExecutor(device.threads) if device.threads > 1 else None
+    try:
+        for start in range(0, n, step):
+            count = min(step, n - start)
+            if pool is None:
+                wp.launch(kernel, dim=count, inputs=[start, *inputs], device=device.name)
+            else:
+                sub = -(-count // device.threads)
+                futures = [pool.submit(wp.launch, kernel, dim=min(sub, count - s),
+                                       inputs=[start + s, *inputs], device=device.name)
+                           for s in range(0, count, sub)]
+                for f in futures:
+                    f.result()
+            if device.is_cuda:
+                wp.synchronize_device(device.name)
+            if on_chunk is not None:
+                on_chunk((start + count) / n)
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True)

@@ -1,0 +1,64 @@
+"""Surface elements: one oriented disk per shading vertex (Bunnell).
+
+The front face (along the normal) emits and reflects; the back face casts shadow only.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scene import SceneData
+
+
+@dataclass
+class Elements:
+    """n disks.
+
+    position, normal: float32[n,3] (m, unit). area: float32[n] (m²), a third of the adjacent
+    triangles' area. albedo, emission: float32[n,3], area-weighted means over adjacent triangles
+    (emission in radiance units). fan_offsets: int32[n+1] and fan_triangles: int32[3T] list, per
+    element, the triangles it is a corner of (CSR), for exact near-field form factors.
+    """
+
+    position: np.ndarray
+    normal: np.ndarray
+    area: np.ndarray
+    albedo: np.ndarray
+    emission: np.ndarray
+    fan_offsets: np.ndarray
+    fan_triangles: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return int(self.position.shape[0])
+
+
+def build(scene: SceneData) -> Elements:
+    """Elements of ``scene``'s shading vertices; vertices in no triangle get zero area."""
+    n = scene.num_vertices
+    tris = scene.triangles
+    tri_area = scene.triangle_areas().astype(np.float64)
+    tri_area = np.where(np.isfinite(tri_area), tri_area, 0.0)
+    corners = tris.reshape(-1)
+    share = np.repeat(tri_area / 3.0, 3)
+    area = np.bincount(corners, weights=share, minlength=n)
+
+    def weighted(values: np.ndarray) -> np.ndarray:
+        per_corner = np.repeat(values.astype(np.float64), 3, axis=0) * share[:, None]
+        acc = np.stack([np.bincount(corners, weights=per_corner[:, c], minlength=n) for c in range(3)], axis=1)
+        return acc / np.where(area > 0, area, 1.0)[:, None]
+
+    order = np.argsort(corners, kind="stable")
+    fan_triangles = (order // 3).astype(np.int32)
+    fan_offsets = np.zeros(n + 1, np.int32)
+    np.cumsum(np.bincount(corners, minlength=n), out=fan_offsets[1:])
+    return Elements(
+        position=np.ascontiguousarray(scene.positions, np.float32),
+        normal=np.ascontiguousarray(scene.normals, np.float32),
+        area=area.astype(np.float32),
+        albedo=weighted(scene.albedo).astype(np.float32),
+        emission=weighted(scene.emission).astype(np.float32),
+        fan_offsets=fan_offsets,
+        fan_triangles=fan_triangles,
+    )

@@ -1,0 +1,157 @@
+"""Form factors as Warp functions (shared by direct light and the solvers).
+
+All form factors here are point-to-area: the fraction of a Lambertian receiver's cosine-weighted
+hemisphere (normal ``n`` at ``p``) covered by the sender, so ``lighting = radiance × F``.
+"""
+import warp as wp
+
+INV_TWO_PI = 0.15915494309189535
+# A corner counts as above the receiver's horizon only if it is higher than this fraction of its
+# distance: a sender in the receiver's own plane (a neighbouring triangle of a flat wall) is seen
+# edge-on and contributes nothing.
+HORIZON_EPS = 1.0e-5
+
+
+@wp.func
+def arc_term(a: wp.vec3, b: wp.vec3, n: wp.vec3) -> float:
+    """γ·(n·ĝ) for the great-circle arc from direction a to b (Lambert's contour integral term)."""
+    c = wp.cross(a, b)
+    lc = wp.length(c)
+    if lc < 1.0e-30:
+        return 0.0
+    return wp.atan2(lc, wp.dot(a, b)) * wp.dot(n, c) / lc
+
+
+@wp.func
+def clip_edge_term(a: wp.vec3, b: wp.vec3, n: wp.vec3):
+    """Contour term of edge a→b clipped to the horizon of normal n (a, b relative to the receiver).
+
+    Returns (term, event, point): event 1 when the edge leaves the upper hemisphere at ``point``,
+    2 when it enters there, 0 otherwise.
+    """
+    ha = wp.dot(a, n) - HORIZON_EPS * wp.length(a)
+    hb = wp.dot(b, n) - HORIZON_EPS * wp.length(b)
+    term = float(0.0)
+    event = int(0)
+    x = wp.vec3(0.0)
+    if ha > 0.0 and hb > 0.0:
+        term = arc_term(a, b, n)
+    elif ha > 0.0:
+        x = a + (b - a) * (ha / (ha - hb))
+        term = arc_term(a, x, n)
+        event = 1
+    elif hb > 0.0:
+        x = a + (b - a) * (ha / (ha - hb))
+        term = arc_term(x, b, n)
+        event = 2
+    return term, event, x
+
+
+@wp.func
+def triangle_ff(p: wp.vec3, n: wp.vec3, v0: wp.vec3, v1: wp.vec3, v2: wp.vec3) -> float:
+    """Exact unoccluded form factor from point p (normal n) to triangle v0 v1 v2, either side facing,
+    clipped to p's horizon."""
+    a0 = v0 - p
+    a1 = v1 - p
+    a2 = v2 - p
+    s = float(0.0)
+    exit_pt = wp.vec3(0.0)
+    entry_pt = wp.vec3(0.0)
+    has_exit = int(0)
+    has_entry = int(0)
+    t, e, x = clip_edge_term(a0, a1, n)
+    s += t
+    if e == 1:
+        exit_pt = x
+        has_exit = 1
+    if e == 2:
+        entry_pt = x
+        has_entry = 1
+    t, e, x = clip_edge_term(a1, a2, n)
+    s += t
+    if e == 1:
+        exit_pt = x
+        has_exit = 1
+    if e == 2:
+        entry_pt = x
+        has_entry = 1
+    t, e, x = clip_edge_term(a2, a0, n)
+    s += t
+    if e == 1:
+        exit_pt = x
+        has_exit = 1
+    if e == 2:
+        entry_pt = x
+        has_entry = 1
+    if has_exit == 1 and has_entry == 1:
+        s += arc_term(exit_pt, entry_pt, n)
+    return wp.abs(s) * INV_TWO_PI
+
+
+@wp.func
+def ellipse_point(center: wp.vec3, u: wp.vec3, v: wp.vec3, hx: float, hy: float, ellipse: int,
+                  k: int, count: int) -> wp.vec3:
+    """Corner k of the lamp outline: a rectangle (4 corners) or an ellipse as a ``count``-gon."""
+    if ellipse == 0:
+        sx = float(1.0)
+        sy = float(1.0)
+        kk = k % 4
+        if kk == 1 or kk == 2:
+            sx = -1.0
+        if kk >= 2:
+            sy = -1.0
+        return center + u * (sx * hx) + v * (sy * hy)
+    ang = 6.283185307179586 * float(k % count) / float(count)
+    return center + u * (hx * wp.cos(ang)) + v * (hy * wp.sin(ang))
+
+
+@wp.func
+def lamp_outline_ff(p: wp.vec3, n: wp.vec3, center: wp.vec3, u: wp.vec3, v: wp.vec3, hx: float,
+                    hy: float, ellipse: int, count: int) -> float:
+    """Exact unoccluded form factor from p to a planar rectangle or ``count``-gon ellipse outline."""
+    nv = 4
+    if ellipse != 0:
+        nv = count
+    s = float(0.0)
+    exit_pt = wp.vec3(0.0)
+    entry_pt = wp.vec3(0.0)
+    has_exit = int(0)
+    has_entry = int(0)
+    for k in range(nv):
+        a = ellipse_point(center, u, v, hx, hy, ellipse, k, count) - p
+        b = ellipse_point(center, u, v, hx, hy, ellipse, k + 1, count) - p
+        t, e, x = clip_edge_term(a, b, n)
+        s += t
+        if e == 1:
+            exit_pt = x
+            has_exit = 1
+        if e == 2:
+            entry_pt = x
+            has_entry = 1
+    if has_exit == 1 and has_entry == 1:
+        s += arc_term(exit_pt, entry_pt, n)
+    return wp.abs(s) * INV_TWO_PI
+
+
+@wp.func
+def disk_ff(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float) -> float:
+    """Disk approximation A·sat(cos_E)·sat(cos_R)/(π d² + A) from p (normal n) to the front face of
+    a disk at q (normal nq, area A); exact on the disk's axis."""
+    d = q - p
+    d2 = wp.dot(d, d)
+    if d2 <= 0.0:
+        return 0.0
+    inv = 1.0 / wp.sqrt(d2)
+    cos_r = wp.max(wp.dot(n, d) * inv, 0.0)
+    cos_e = wp.max(-wp.dot(nq, d) * inv, 0.0)
+    return area * cos_e * cos_r / (3.141592653589793 * d2 + area)
+
+
+@wp.func
+def tangent_frame(w: wp.vec3):
+    """Two unit vectors perpendicular to unit w and to each other."""
+    a = wp.vec3(1.0, 0.0, 0.0)
+    if wp.abs(w[0]) > 0.9:
+        a = wp.vec3(0.0, 1.0, 0.0)
+    t = wp.normalize(wp.cross(w, a))
+    return t, wp.cross(w, t)

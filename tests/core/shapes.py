@@ -1,0 +1,78 @@
+"""Small scenes built in code for the core tests (no bpy)."""
+from __future__ import annotations
+
+import numpy as np
+
+from radiosity_baker.core.scene import Lamps, SceneData
+
+
+def grid(size: float, n: int, z: float = 0.0, flip: bool = False):
+    """An n×n-quad square of side ``size`` centred at the origin at height z, normal +Z (−Z if flip).
+
+    Returns positions float32[(n+1)²,3], normals, triangles int32[2n²,3] (CCW from the normal side).
+    """
+    s = np.linspace(-size / 2, size / 2, n + 1)
+    x, y = np.meshgrid(s, s, indexing="xy")
+    pos = np.stack([x.ravel(), y.ravel(), np.full(x.size, z)], axis=1).astype(np.float32)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    tris = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int32)
+    nrm = np.tile(np.array([0, 0, 1], np.float32), (len(pos), 1))
+    if flip:
+        tris = tris[:, ::-1].copy()
+        nrm = -nrm
+    return pos, nrm, tris
+
+
+def icosphere(radius: float = 1.0, subdivisions: int = 3, inward: bool = True):
+    """A closed sphere; normals and winding face inward if ``inward``."""
+    t = (1 + 5 ** 0.5) / 2
+    v = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t],
+                  [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], np.float64)
+    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    for _ in range(subdivisions):
+        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        uniq, inv = np.unique(edges, axis=0, return_inverse=True)
+        mid = v[uniq].mean(axis=1)
+        mid /= np.linalg.norm(mid, axis=1, keepdims=True)
+        m = inv.reshape(3, -1).T + len(v)
+        v = np.concatenate([v, mid])
+        f = np.concatenate([np.stack([f[:, 0], m[:, 0], m[:, 2]], 1), np.stack([f[:, 1], m[:, 1], m[:, 0]], 1),
+                            np.stack([f[:, 2], m[:, 2], m[:, 1]], 1), m])
+    nrm = v.copy()
+    if inward:
+        f = f[:, ::-1]
+        nrm = -nrm
+    return (v * radius).astype(np.float32), nrm.astype(np.float32), np.ascontiguousarray(f, np.int32)
+
+
+def lamp(kind: int, position=(0, 0, 0), direction=(0, 0, -1), size=(0.0, 0.0), shape=0,
+         power=(1.0, 1.0, 1.0), spot_size=0.0, spot_blend=0.0, axis_u=(1, 0, 0), axis_v=(0, 1, 0)) -> Lamps:
+    def row(x):
+        return np.array([x], np.float32)
+    return Lamps(kind=np.array([kind], np.int32), position=row(position), direction=row(direction),
+                 axis_u=row(axis_u), axis_v=row(axis_v), size=row(size), shape=np.array([shape], np.int32),
+                 power=row(power), spot_size=np.array([spot_size], np.float32),
+                 spot_blend=np.array([spot_blend], np.float32), names=["Lamp"])
+
+
+def scene(parts, lamps: Lamps | None = None) -> SceneData:
+    """SceneData from [(positions, normals, triangles, albedo rgb, emission rgb), ...]."""
+    pos, nrm, tris, alb, emi, obj = [], [], [], [], [], []
+    base = 0
+    for k, (p, n, t, a, e) in enumerate(parts):
+        pos.append(p)
+        nrm.append(n)
+        tris.append(t + base)
+        alb.append(np.tile(np.asarray(a, np.float32), (len(t), 1)))
+        emi.append(np.tile(np.asarray(e, np.float32), (len(t), 1)))
+        obj.append(np.full(len(t), k, np.int32))
+        base += len(p)
+    return SceneData(positions=np.concatenate(pos), normals=np.concatenate(nrm),
+                     triangles=np.concatenate(tris), tri_object=np.concatenate(obj),
+                     albedo=np.concatenate(alb), emission=np.concatenate(emi),
+                     lamps=lamps if lamps is not None else Lamps.empty(),
+                     object_names=[f"part{k}" for k in range(len(parts))])
