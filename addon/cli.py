@@ -1,0 +1,221 @@
+"""Command line: ``python -m radiosity_baker bake FILE.blend [options]`` (bpy module) and
+``blender -c radiosity_baker bake FILE.blend [options]`` (register_cli_command).
+
+Settings start from core ``Settings`` defaults; the options below override them. The input file
+is never written: results reach disk only through ``--save`` (which may name the input on purpose).
+Exit status: 0 done, 1 the bake failed, 2 bad arguments or unreadable input / unwritable output.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import bpy
+
+from ..core import BakeCancelled, Settings
+from ..core import settings as core_settings
+from .job import USER_ERRORS, BakeJob
+
+PROG = "radiosity_baker"
+_ROOT = Path(__file__).resolve().parent.parent  # the repository / extension folder
+
+
+class UsageError(Exception):
+    """Bad arguments, unreadable input or unwritable output (exit status 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    # argparse exits the process on errors, which would close Blender under `blender -c`.
+    def error(self, message):
+        raise UsageError(message)
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, not {value}")
+    return value
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description="Bake global illumination into Blender meshes.")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    bake = commands.add_parser("bake", help="bake FILE.blend (the file itself is left unchanged)")
+    defaults = Settings()
+    bake.add_argument("blend", metavar="FILE.blend", help="the .blend file to bake")
+    bake.add_argument("--method", choices=core_settings.METHODS, default=defaults.method)
+    bake.add_argument("--content", choices=core_settings.CONTENTS, default=defaults.content)
+    bake.add_argument("--target", choices=core_settings.TARGETS, default=defaults.target)
+    bake.add_argument("--attribute", metavar="NAME", default=defaults.attribute,
+                      help="color attribute written (default %(default)s)")
+    bake.add_argument("--device", choices=core_settings.DEVICES, default=defaults.device)
+    bake.add_argument("--objects", metavar="A,B", type=lambda s: [n for n in s.split(",") if n],
+                      help="names of the objects to write (default: every mesh); all objects "
+                           "still cast and reflect light")
+    bake.add_argument("--samples", dest="light_samples", metavar="N", type=_positive_int,
+                      default=defaults.light_samples, help="shadow samples per light and receiver")
+    bake.add_argument("--rays", dest="visibility_rays", metavar="N", type=_positive_int,
+                      default=defaults.visibility_rays,
+                      help="visibility rays per element pair (bruteforce)")
+    bake.add_argument("--bounces", metavar="N", type=_positive_int, default=defaults.bounces)
+    bake.add_argument("--tolerance", type=float, default=defaults.tolerance)
+    bake.add_argument("--max-pairs", metavar="N", type=_positive_int, default=defaults.max_pairs)
+    bake.add_argument("--seed", type=int, default=defaults.seed)
+    bake.add_argument("--bake-copy", action="store_true",
+                      help="bake objects whose modifiers change their topology into a new "
+                           "object <name>_baked instead of skipping them")
+    bake.add_argument("--save", metavar="OUT.blend", type=Path,
+                      help="save the baked scene here (nothing is saved without it)")
+    bake.add_argument("--report", metavar="REPORT.json", type=Path,
+                      help="write timings, counts, device, settings and versions as JSON")
+    bake.add_argument("--preview", metavar="OUT.png", type=Path,
+                      help="render the camera view of the baked attribute to a PNG (Cycles)")
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run the command line with ``argv`` (without the program name); returns the exit status."""
+    try:
+        args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
+    except UsageError as exc:
+        return _error(str(exc), 2)
+    except SystemExit as exc:  # --help
+        return exc.code or 0
+    try:
+        return _bake(args)
+    except UsageError as exc:
+        return _error(str(exc), 2)
+    except BakeCancelled:
+        return _error("bake cancelled: nothing was written", 1)
+    except USER_ERRORS as exc:
+        return _error(str(exc), 1)
+    except Exception as exc:  # noqa: BLE001 - a bug: still one line, and Blender stays open
+        return _error(f"internal error: {type(exc).__name__}: {exc}", 1)
+
+
+def _bake(args) -> int:
+    settings = Settings(**{k: v for k, v in vars(args).items()
+                           if k in Settings.__dataclass_fields__})
+    try:
+        settings.validate()
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    blend = Path(args.blend).resolve()
+    if not blend.is_file():
+        raise UsageError(f"no such .blend file: {args.blend}")
+    outputs = {name: getattr(args, name).resolve() for name in ("save", "report", "preview")
+               if getattr(args, name) is not None}
+    for path in outputs.values():
+        _check_writable(path)
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+    except RuntimeError as exc:
+        raise UsageError(f"cannot open {blend}: {_first_line(exc)}") from None
+
+    job = BakeJob(settings, args.objects, progress=_Progress())
+    for message in job.run_sync(bpy.context):
+        print(f"{PROG}: warning: {message}", file=sys.stderr)
+
+    if "save" in outputs:
+        try:
+            bpy.ops.wm.save_as_mainfile(filepath=str(outputs["save"]), copy=True)
+        except RuntimeError as exc:
+            raise UsageError(f"cannot save {outputs['save']}: {_first_line(exc)}") from None
+    if "preview" in outputs:  # after saving: the file never holds the preview's temporary data
+        from .preview import render_preview
+        render_preview(bpy.context.scene, settings.attribute, outputs["preview"])
+    if "report" in outputs:
+        report = _report(job, settings, str(blend), {k: str(v) for k, v in outputs.items()})
+        outputs["report"].write_text(json.dumps(report, indent=2) + "\n")
+    result = job.result
+    print(f"{PROG}: baked {result.counts.get('elements', 0)} elements on {result.device} "
+          f"in {job.seconds:.2f} s")
+    return 0
+
+
+def _check_writable(path: Path) -> None:
+    """Raise UsageError unless a file can be created at ``path`` (checked before baking)."""
+    if path.is_dir():
+        raise UsageError(f"cannot write {path}: it is a directory")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise UsageError(f"cannot write {path}: permission denied")
+    try:  # creating a file is the only test that holds for every file system and user
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".radiosity_baker_"):
+            pass
+    except OSError as exc:
+        raise UsageError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def _first_line(exc: BaseException) -> str:
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+
+
+class _Progress:
+    """Prints ``stage NN%`` lines to stdout: on each new stage and at most once a second."""
+
+    def __init__(self, interval: float = 1.0):
+        self._interval = interval
+        self._stage = None
+        self._last = 0.0
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        now = time.monotonic()
+        if stage == self._stage and now - self._last < self._interval:
+            return
+        self._stage, self._last = stage, now
+        print(f"{PROG}: {stage} {fraction:4.0%}", flush=True)
+
+
+def _report(job: BakeJob, settings: Settings, blend: str, outputs: dict) -> dict:
+    """The --report JSON: versions, device, settings, seconds per stage, counts, memory, warnings."""
+    import numpy
+    import warp
+
+    result = job.result
+    return {
+        "blender_version": bpy.app.version_string,
+        "radiosity_baker_version": package_version(),
+        "python_version": platform.python_version(),
+        "numpy_version": numpy.__version__,
+        "warp_version": warp.__version__,
+        "device": result.device,
+        "settings": settings.as_dict(),
+        "seconds": {"total": job.seconds, **job.timings},
+        "counts": result.counts,
+        "peak_memory_bytes": result.peak_memory_bytes,
+        "warnings": job.warnings,
+        "input": blend,
+        "outputs": outputs,
+    }
+
+
+def package_version() -> str:
+    """Version from blender_manifest.toml, else pyproject.toml, else the installed metadata."""
+    import tomllib
+
+    for name, keys in (("blender_manifest.toml", ("version",)),
+                       ("pyproject.toml", ("project", "version"))):
+        try:
+            data = tomllib.loads((_ROOT / name).read_text())
+        except (OSError, tomllib.TOMLDecodeError):
+            continue
+        for key in keys:
+            data = data.get(key, {}) if isinstance(data, dict) else {}
+        if isinstance(data, str):
+            return data
+    from importlib import metadata
+    try:
+        return metadata.version("radiosity_baker")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _error(message: str, status: int) -> int:
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    return status

@@ -1,0 +1,68 @@
+"""Properties › Render › "Radiosity Bake", shown whatever the render engine."""
+from __future__ import annotations
+
+import bpy
+
+from .operator import OBJECT_OT_radiosity_bake
+
+
+class RENDER_PT_radiosity_bake(bpy.types.Panel):
+    bl_label = "Radiosity Bake"
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = "render"
+
+    @classmethod
+    def poll(cls, context):
+        # The bake does not use the render engine: no COMPAT_ENGINES filter, every engine shows it.
+        return context.scene is not None
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        s = context.scene.radiosity_baker
+        col = layout.column()
+        col.prop(s, "method")
+        col.prop(s, "content")
+        col.prop(s, "target")
+        col.prop(s, "attribute")
+        col.prop(s, "device")
+        col = layout.column(align=True)
+        col.prop(s, "light_samples")
+        sub = col.column(align=True)
+        sub.active = s.method == "bruteforce"
+        sub.prop(s, "visibility_rays")
+        sub.prop(s, "bounces")
+        layout.prop(s, "bake_copy")
+        row = layout.row()
+        row.scale_y = 1.5
+        row.operator(OBJECT_OT_radiosity_bake.bl_idname, text="Bake", icon='RENDER_STILL')
+        stats = s.last_bake
+        if stats.device:
+            box = layout.box()
+            box.label(text=f"Last bake: {stats.seconds:.2f} s on {stats.device}")
+            box.label(text=f"{stats.elements} elements, {stats.triangles} triangles")
+
+
+class RENDER_PT_radiosity_bake_advanced(bpy.types.Panel):
+    bl_label = "Advanced"
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = "render"
+    bl_parent_id = RENDER_PT_radiosity_bake.__name__
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        s = context.scene.radiosity_baker
+        col = layout.column()
+        col.active = s.method == "bruteforce"
+        col.prop(s, "tolerance")
+        col.prop(s, "max_pairs")
+        layout.prop(s, "seed")
+
+
+classes = (RENDER_PT_radiosity_bake, RENDER_PT_radiosity_bake_advanced)
