@@ -26,6 +26,8 @@ _SURFACE_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 # vertex carry the same normal, corners on either side of a hard edge differ by far more.
 _NORMAL_STEPS = 1024
 _GREY = (0.8, 0.8, 0.8)
+# Custom property on an object made by realize_copy: the name of the object it was made from.
+COPY_SOURCE_PROPERTY = "radiosity_baker_source"
 # Barycentric points averaged when an image texture is sampled over a triangle: the centroid and
 # the centres of the three sub-triangles towards each corner.
 _TEXTURE_BARY = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6],
@@ -427,7 +429,8 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
 
     receivers: original bpy objects whose results will be written (None: every visible mesh
     object); a target is made for each one that is a visible mesh with faces, the others get a
-    warning. The whole visible scene is always extracted, since it casts light and shadow.
+    warning. The whole visible scene is always extracted, since it casts light and shadow, except
+    copies made by :func:`realize_copy` while their source renders (they would double it).
     Raises ExtractionError for NaN / infinite geometry (naming the object) or when nothing has faces.
     """
     warnings: list[str] = []
@@ -460,6 +463,8 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
                 continue
             # The viewport decides show_self; a render shows an instancer as its own flag says.
             if original.is_instancer and not original.show_instancer_for_render:
+                continue
+            if _is_copy_of_rendered(original, collections, receiver_names):
                 continue
             name = original.name
         # Instances are only valid inside this loop: copy the matrix now.
@@ -494,16 +499,18 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
         offset += positions.shape[0]
 
     # An object whose geometry nodes output only instances has no faces of its own: not news.
-    no_faces = [n for n in dict.fromkeys(no_faces) if n not in instancers]
-    warnings.extend(f"{n} has no faces: skipped" for n in no_faces)
+    warnings.extend(f"{n} has no faces: skipped" for n in dict.fromkeys(no_faces)
+                    if n not in instancers)
     _warn_unseen(depsgraph, collections, seen, warnings)
     if receiver_names is not None:
         made = {t.object_name for t in targets}
         for rname, rob in receiver_names.items():
-            if rname in made or rname in no_faces:
+            if rname in made or (rname in no_faces and rname not in instancers):
                 continue
             if rob.type != "MESH":
                 warnings.append(f"{rname} is not a mesh: its results cannot be written")
+            elif rname in instancers:
+                warnings.append(f"{rname} has no faces of its own, only instances: not baked")
             else:
                 warnings.append(f"{rname} is not visible in renders: not baked")
     if not parts:
@@ -517,6 +524,15 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
                       tri_object=tri_object, albedo=cat(3), emission=cat(4),
                       lamps=_lamps(lamp_items), object_names=names)
     return Extraction(scene=scene, targets=targets, warnings=warnings)
+
+
+def _is_copy_of_rendered(ob, collections: set, receiver_names) -> bool:
+    """Whether ``ob`` is a copy made by :func:`realize_copy` whose source object also renders (and
+    the copy is not an explicit receiver): both in the scene would put the geometry there twice."""
+    source = bpy.data.objects.get(ob.get(COPY_SOURCE_PROPERTY, ""))
+    if source is None or receiver_names is not None and ob.name in receiver_names:
+        return False
+    return _renders(source, collections)
 
 
 def _warn_unseen(depsgraph, collections: set, seen: set, warnings: list) -> None:
@@ -535,8 +551,10 @@ def realize_copy(context, obj):
     the same collections, with the same world matrix and materials; ``obj`` is not modified.
 
     The copy's vertices are the evaluated mesh's, in the same order, so per-vertex results of the
-    evaluated mesh map onto it one-to-one. An existing mesh object of that name (a previous bake
-    into a copy) is reused: its mesh is replaced.
+    evaluated mesh map onto it one-to-one. An existing copy of ``obj`` of that name (a previous
+    bake into a copy) is reused: its mesh is replaced. The copy records its source in the custom
+    property ``radiosity_baker_source``; extract_scene leaves such a copy out while its source
+    renders, so a rebake does not see the geometry twice.
     """
     depsgraph = context.evaluated_depsgraph_get()
     ob_eval = obj.evaluated_get(depsgraph)
@@ -545,13 +563,14 @@ def realize_copy(context, obj):
                                            depsgraph=depsgraph)
     mesh.name = name
     copy = bpy.data.objects.get(name)
-    if copy is not None and copy.type == "MESH" and copy.library is None:
+    if copy is not None and copy.get(COPY_SOURCE_PROPERTY) == obj.name and copy.library is None:
         old = copy.data
         copy.data = mesh
         if old.users == 0:
             bpy.data.meshes.remove(old)
     else:
         copy = bpy.data.objects.new(name, mesh)
+        copy[COPY_SOURCE_PROPERTY] = obj.name
         for collection in obj.users_collection:
             collection.objects.link(copy)
     copy.matrix_world = obj.matrix_world.copy()

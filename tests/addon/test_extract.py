@@ -331,6 +331,9 @@ def test_geometry_nodes_instances_share_one_read_mesh_and_keep_their_matrices():
                      for k in range(3))
     assert centres == [(0, 0, 0), (0, 5, 0), (5, 0, 0)]
     assert not any("no faces" in w for w in ex.warnings)
+    receiver = extract(receivers=[grid])
+    assert receiver.targets == []
+    assert "Grid has no faces of its own, only instances: not baked" in receiver.warnings
 
 
 def test_receivers_limit_targets():

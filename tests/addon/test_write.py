@@ -157,6 +157,17 @@ def test_topology_changing_modifier_with_bake_copy_writes_into_a_copy():
     assert "Lighting" not in cube.data.attributes and len(cube.data.vertices) == 8
 
 
+def test_rebake_into_copy_reuses_the_copy_and_leaves_it_out_of_the_scene():
+    cube = add_cube()
+    cube.modifiers.new("s", "SUBSURF").levels = 1
+    for _ in range(2):
+        ex = extract()
+        assert ex.scene.object_names == ["Cube"]  # the first bake's copy does not double it
+        write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings(bake_copy=True))
+    assert [ob.name for ob in bpy.data.objects] == ["Cube", "Cube_baked"]
+    assert len(bpy.data.meshes) == 2
+
+
 def test_shared_mesh_gets_the_average_and_a_warning():
     a = add_cube(location=(-2, 0, 0))
     b = bpy.data.objects.new("Twin", a.data)
