@@ -6,6 +6,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import bpy
+import numpy as np
 from mathutils import Vector
 
 _NAME = "radiosity_baker_preview"
@@ -16,7 +17,8 @@ def render_preview(scene, attribute_name: str, path, size: int = 512, samples: i
 
     Every surface shows its colour attribute ``attribute_name`` as emission of strength 1 (black
     where it is missing), through Cycles on the CPU with ``samples`` samples and no bounces, view
-    transform Standard, so pixel values are the baked values (clipped, sRGB-encoded). Everything
+    transform Standard, so pixel values are the baked values (sRGB-encoded), scaled down by whole
+    exposure stops when needed so that at most 1 % of the vertices clip. Everything
     the render needs (material override, camera when the scene has none, render settings) is
     temporary: the scene is as before afterwards, whatever happens.
     """
@@ -39,7 +41,7 @@ def render_preview(scene, attribute_name: str, path, size: int = 512, samples: i
         (scene.cycles, "max_bounces", 0),
         (scene.view_settings, "view_transform", 'Standard'),
         (scene.view_settings, "look", 'None'),
-        (scene.view_settings, "exposure", 0.0),
+        (scene.view_settings, "exposure", _exposure(scene, attribute_name)),
         (scene.view_settings, "gamma", 1.0),
         (scene.view_settings, "use_curve_mapping", False),
     ]
@@ -54,6 +56,21 @@ def render_preview(scene, attribute_name: str, path, size: int = 512, samples: i
             data = camera.data
             bpy.data.objects.remove(camera)
             bpy.data.cameras.remove(data)
+
+
+def _exposure(scene, attribute_name: str) -> float:
+    """Exposure (stops, ≤ 0) that brings the 99th percentile of the attribute's values to ≤ 1."""
+    values = []
+    for ob in scene.objects:
+        attr = ob.data.attributes.get(attribute_name) if ob.type == 'MESH' else None
+        if attr is not None and attr.data_type == 'FLOAT_COLOR' and len(attr.data):
+            rgba = np.empty(len(attr.data) * 4, np.float32)
+            attr.data.foreach_get("color", rgba)
+            values.append(rgba.reshape(-1, 4)[:, :3].max(axis=1))
+    if not values:
+        return 0.0
+    high = float(np.percentile(np.concatenate(values), 99))
+    return -float(math.ceil(math.log2(high))) if high > 1.0 else 0.0
 
 
 @contextmanager

@@ -1,0 +1,86 @@
+"""Scenes and settings that cannot be baked: a clear message naming the culprit, nothing changed."""
+import threading
+
+import bpy
+import pytest
+
+from radiosity_baker.addon import cli
+from radiosity_baker.addon.job import BakeJob
+
+from scenes import GROUND, OCCLUDER, fast_settings, grid, lit_ground, snapshot
+
+
+def add_mesh(scene, name, verts, edges=(), faces=()):
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(list(verts), list(edges), list(faces))
+    ob = bpy.data.objects.new(name, mesh)
+    scene.collection.objects.link(ob)
+    return ob
+
+
+def test_nan_geometry_is_an_error_naming_the_object(empty_scene):
+    lit_ground(empty_scene)
+    fast_settings(empty_scene)
+    add_mesh(empty_scene, "Broken", [(0, 0, 1), (1, 0, 1), (float("nan"), 1, 1)], faces=[(0, 1, 2)])
+    before = snapshot()
+    with pytest.raises(RuntimeError, match="Broken"):
+        bpy.ops.object.radiosity_bake()
+    assert snapshot() == before
+
+
+def test_scene_without_faces_is_a_clear_error(empty_scene):
+    fast_settings(empty_scene)
+    add_mesh(empty_scene, "Wire", [(0, 0, 0), (1, 0, 0), (1, 1, 0)], edges=[(0, 1), (1, 2)])
+    before = snapshot()
+    with pytest.raises(RuntimeError, match="nothing to bake"):
+        bpy.ops.object.radiosity_bake()
+    assert snapshot() == before
+
+
+def test_empty_scene_is_a_clear_error(empty_scene):
+    with pytest.raises(RuntimeError, match="nothing to bake"):
+        bpy.ops.object.radiosity_bake()
+
+
+def test_object_without_faces_is_skipped_with_a_warning(empty_scene):
+    lit_ground(empty_scene)
+    fast_settings(empty_scene)
+    add_mesh(empty_scene, "Wire", [(0, 0, 0), (1, 0, 0)], edges=[(0, 1)])
+    job = BakeJob(empty_scene.radiosity_baker.to_settings())
+    warnings = job.run_sync(bpy.context)
+    assert any("Wire" in w for w in warnings)
+    assert "Lighting" in bpy.data.objects[GROUND].data.attributes
+    assert "Lighting" not in bpy.data.objects["Wire"].data.attributes
+
+
+def test_reserved_attribute_name_is_refused_before_writing(empty_scene):
+    lit_ground(empty_scene)
+    fast_settings(empty_scene, attribute="position")
+    before = snapshot()
+    with pytest.raises(RuntimeError, match="reserved"):
+        bpy.ops.object.radiosity_bake()
+    assert snapshot() == before
+
+
+def test_object_deleted_during_a_threaded_bake_writes_nothing(empty_scene):
+    lit_ground(empty_scene)
+    fast_settings(empty_scene)
+    job = BakeJob(empty_scene.radiosity_baker.to_settings())
+    job.start(bpy.context)
+    bpy.data.objects.remove(bpy.data.objects[OCCLUDER])
+    before = snapshot()
+    while not job.poll()[2]:
+        threading.Event().wait(0.01)
+    with pytest.raises(ValueError, match=OCCLUDER):
+        job.finish(bpy.context)
+    assert snapshot() == before
+
+
+def test_cli_nan_geometry_is_one_line_naming_the_object(empty_scene, tmp_path, capsys):
+    grid(empty_scene, GROUND, 2.0, 3)
+    add_mesh(empty_scene, "Broken", [(0, 0, 1), (1, 0, 1), (float("inf"), 1, 1)], faces=[(0, 1, 2)])
+    path = tmp_path / "nan.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    assert cli.main(["bake", str(path), "--method", "direct"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("radiosity_baker: error:") and "Broken" in err[-1]
