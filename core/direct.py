@@ -20,8 +20,9 @@ from .scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SceneData
 
 PI = math.pi
 ELLIPSE_SIDES = 32
-# Inscribed regular polygon area / ellipse area: the outline form factor is scaled back by it.
-ELLIPSE_AREA_RATIO = ELLIPSE_SIDES / (2.0 * PI) * math.sin(2.0 * PI / ELLIPSE_SIDES)
+# An ellipse lamp's outline is a regular polygon whose radii are scaled by this so that its area
+# equals the ellipse's.
+ELLIPSE_SCALE = 1.0 / math.sqrt(ELLIPSE_SIDES / (2.0 * PI) * math.sin(2.0 * PI / ELLIPSE_SIDES))
 
 
 class SceneGeometry:
@@ -111,7 +112,7 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
                    lamp_smooth: wp.array(dtype=wp.float32), em_v0: wp.array(dtype=wp.vec3),
                    em_v1: wp.array(dtype=wp.vec3), em_v2: wp.array(dtype=wp.vec3),
                    em_radiance: wp.array(dtype=wp.vec3), side: int, eps: float, far: float,
-                   seed: int, ellipse_sides: int, ellipse_ratio: float,
+                   seed: int, ellipse_sides: int, ellipse_scale: float,
                    out: wp.array(dtype=wp.vec3), rays: wp.array(dtype=wp.int32)):
     i = wp.tid() + offset
     p = points[i]
@@ -190,7 +191,7 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
             ff = float(0.0)
             if ell != 0:
                 area = 3.141592653589793 * hx * hy
-                ff = lamp_outline_ff(p, n, c, lamp_u[l], lamp_v[l], hx, hy, 1, ellipse_sides) / ellipse_ratio
+                ff = lamp_outline_ff(p, n, c, lamp_u[l], lamp_v[l], hx * ellipse_scale, hy * ellipse_scale, 1, ellipse_sides)
             else:
                 ff = lamp_outline_ff(p, n, c, lamp_u[l], lamp_v[l], hx, hy, 0, 4)
             if ff <= 0.0 or area <= 0.0:
@@ -271,6 +272,6 @@ def direct_lighting(geometry: SceneGeometry, scene: SceneData, points: np.ndarra
         [g.mesh.id, pts, nrm, g.lamp_kind, g.lamp_pos, g.lamp_dir, g.lamp_u, g.lamp_v, g.lamp_size,
          g.lamp_shape, g.lamp_power, g.lamp_cos_half, g.lamp_smooth, g.em_v0, g.em_v1, g.em_v2,
          g.em_radiance, side, g.eps, g.far, int(settings.seed), ELLIPSE_SIDES,
-         float(ELLIPSE_AREA_RATIO), out, rays],
+         float(ELLIPSE_SCALE), out, rays],
         dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
     return out.numpy().astype(np.float32), int(rays.numpy().astype(np.int64).sum())

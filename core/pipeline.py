@@ -110,8 +110,9 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
         solution = stages.run("solve", bruteforce.solve, geometry, els, lit_direct, settings, dev,
                               solve_progress)
         indirect = solution.indirect
-        counts.update(solution.counts)
-        counts["rays"] += int(solution.counts.get("rays", 0))
+        solver_counts = dict(solution.counts)
+        counts["rays"] += int(solver_counts.pop("rays", 0))
+        counts.update(solver_counts)
     else:
         indirect = np.zeros_like(lit_direct)
 

@@ -1,0 +1,118 @@
+"""Direct light of each lamp type and of emissive triangles against closed forms (Cycles units)."""
+import numpy as np
+import pytest
+
+import shapes
+from radiosity_baker.core import Settings, bake
+from radiosity_baker.core.scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SHAPE_ELLIPSE
+
+F_UNIT_SQUARE_H1 = 0.23946  # point under a unit square at height 1
+
+
+def receiver_plane(n=4, size=0.02):
+    """A tiny receiver plane at the origin facing +Z (its vertices are the receivers)."""
+    return shapes.grid(size, n)
+
+
+def bake_direct(parts, lamps=None, samples=16):
+    return bake(shapes.scene(parts, lamps), Settings(method="direct", light_samples=samples)).lighting
+
+
+def test_point_lamp_follows_inverse_square_and_cosine():
+    p, n, t = shapes.grid(4.0, 8)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], shapes.lamp(LAMP_POINT, (0.3, 0, 2), power=(100, 50, 10)))
+    v = np.array([0.3, 0, 2]) - p
+    d2 = (v ** 2).sum(1)
+    expect = np.outer(v[:, 2] / np.sqrt(d2) / (4 * np.pi ** 2 * d2), [100, 50, 10])
+    np.testing.assert_allclose(lit, expect, rtol=1e-4)
+
+
+def test_spot_lamp_is_a_point_lamp_inside_its_cone_and_dark_outside():
+    p, n, t = shapes.grid(6.0, 12)
+    cone = np.radians(60.0)
+    lamp = shapes.lamp(LAMP_SPOT, (0, 0, 1), direction=(0, 0, -1), power=(100,) * 3, spot_size=cone, spot_blend=0.0)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)[:, 0]
+    angle = np.arctan2(np.linalg.norm(p[:, :2], axis=1), 1.0)
+    d2 = 1 + (p[:, :2] ** 2).sum(1)
+    point = 100 / np.sqrt(d2) / (4 * np.pi ** 2 * d2)
+    inside, outside = angle < cone / 2 - 0.01, angle > cone / 2 + 0.01
+    assert inside.sum() > 4 and outside.sum() > 4
+    np.testing.assert_allclose(lit[inside], point[inside], rtol=1e-4)
+    assert np.all(lit[outside] == 0)
+
+
+def test_spot_blend_softens_the_cone_edge_with_a_smoothstep():
+    p, n, t = shapes.grid(6.0, 30)
+    cone, blend = np.radians(90.0), 0.5
+    lamp = shapes.lamp(LAMP_SPOT, (0, 0, 1), power=(100,) * 3, spot_size=cone, spot_blend=blend)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)[:, 0]
+    d2 = 1 + (p[:, :2] ** 2).sum(1)
+    cos_a = 1 / np.sqrt(d2)
+    cos_half = np.cos(cone / 2)
+    x = np.clip((cos_a - cos_half) / ((1 - cos_half) * blend), 0, 1)
+    expect = 100 * cos_a / (4 * np.pi ** 2 * d2) * x * x * (3 - 2 * x)
+    assert ((x > 0.05) & (x < 0.95)).sum() > 10
+    np.testing.assert_allclose(lit, expect, rtol=1e-4, atol=1e-7)
+
+
+def test_sun_gives_strength_times_cosine_over_pi():
+    p, n, t = receiver_plane()
+    theta = np.radians(30)
+    d = (np.sin(theta), 0, -np.cos(theta))
+    for angle in (0.0, np.radians(5)):
+        lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], shapes.lamp(LAMP_SUN, direction=d, size=(angle, 0), power=(3, 3, 3)))
+        np.testing.assert_allclose(lit, 3 * np.cos(theta) / np.pi, rtol=1e-4)
+
+
+def test_square_area_lamp_radiance_is_power_over_pi_area():
+    p, n, t = receiver_plane()
+    lamp = shapes.lamp(LAMP_AREA, (0, 0, 1), direction=(0, 0, -1), size=(1, 1), power=(10,) * 3)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)
+    centre = np.argmin((p ** 2).sum(1))
+    assert lit[centre, 0] == pytest.approx(10 / np.pi * F_UNIT_SQUARE_H1, rel=2e-3)
+
+
+def test_disk_area_lamp_matches_coaxial_disk_form_factor():
+    p, n, t = receiver_plane()
+    lamp = shapes.lamp(LAMP_AREA, (0, 0, 1), direction=(0, 0, -1), size=(2, 2), shape=SHAPE_ELLIPSE, power=(10,) * 3)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)
+    centre = np.argmin((p ** 2).sum(1))
+    assert lit[centre, 0] == pytest.approx(10 / (np.pi * np.pi) * 0.5, rel=3e-3)
+
+
+def test_area_lamp_lights_only_the_side_it_faces():
+    p, n, t = receiver_plane()
+    lamp = shapes.lamp(LAMP_AREA, (0, 0, 1), direction=(0, 0, 1), size=(1, 1), power=(10,) * 3)
+    assert np.all(bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp) == 0)
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_emissive_quad_lights_from_both_faces(flip):
+    p, n, t = receiver_plane()
+    qp, qn, qt = shapes.grid(1.0, 1, z=1.0, flip=not flip)  # flip=False: emitter faces away (up)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3), (qp, qn, qt, (0.5,) * 3, (2, 2, 2))])
+    centre = np.argmin((p ** 2).sum(1))
+    assert lit[centre, 0] == pytest.approx(2 * F_UNIT_SQUARE_H1, rel=2e-3)
+
+
+def test_occluder_casts_a_hard_shadow_from_a_point_lamp():
+    p, n, t = shapes.grid(4.0, 20)
+    op, on, ot = shapes.grid(0.8, 1, z=1.0)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3), (op, on, ot, (0.5,) * 3, (0,) * 3)],
+                      shapes.lamp(LAMP_POINT, (0, 0, 2), power=(100,) * 3))[: len(p), 0]
+    r = np.abs(p[:, :2]).max(1)
+    assert np.all(lit[r < 0.75] == 0)       # umbra: projected square has half-size 0.8
+    assert np.all(lit[r > 0.85] > 0)
+
+
+def test_area_lamp_with_occluder_gives_a_soft_penumbra():
+    p, n, t = shapes.grid(4.0, 40)
+    op, on, ot = shapes.grid(0.8, 1, z=1.0)
+    lamp = shapes.lamp(LAMP_AREA, (0, 0, 2), size=(0.5, 0.5), power=(100,) * 3)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3), (op, on, ot, (0.5,) * 3, (0,) * 3)], lamp, samples=64)[: len(p), 0]
+    unoccluded = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp, samples=64)[:, 0]
+    frac = lit / unoccluded
+    r = np.abs(p[:, :2]).max(1)
+    assert np.all(frac[r < 0.2] < 0.02)
+    assert np.all(frac[r > 1.4] > 0.98)
+    assert ((frac > 0.1) & (frac < 0.9)).sum() > 20

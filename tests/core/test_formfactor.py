@@ -1,0 +1,106 @@
+"""Form factor functions against exact values and numerical integration."""
+import numpy as np
+import pytest
+import warp as wp
+
+from radiosity_baker.core import device
+from radiosity_baker.core.formfactor import disk_ff, lamp_outline_ff, triangle_ff
+
+device.init_warp()
+
+
+@wp.kernel
+def _tri_kernel(p: wp.array(dtype=wp.vec3), n: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3),
+                out: wp.array(dtype=float)):
+    i = wp.tid()
+    out[i] = triangle_ff(p[i], n[i], v[3 * i], v[3 * i + 1], v[3 * i + 2])
+
+
+@wp.kernel
+def _disk_kernel(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, out: wp.array(dtype=float)):
+    out[0] = disk_ff(p, n, q, nq, area)
+
+
+@wp.kernel
+def _outline_kernel(p: wp.vec3, n: wp.vec3, hx: float, hy: float, ellipse: int, count: int,
+                    out: wp.array(dtype=float)):
+    out[0] = lamp_outline_ff(p, n, wp.vec3(0.0, 0.0, 1.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0),
+                             hx, hy, ellipse, count)
+
+
+def triangles_ff(p, n, tris):
+    """Sum of triangle_ff from point p (normal n) over float[k,3,3] triangles."""
+    k = len(tris)
+    out = wp.zeros(k, dtype=float, device="cpu")
+    wp.launch(_tri_kernel, dim=k, inputs=[wp.array(np.tile(p, (k, 1)).astype(np.float32), dtype=wp.vec3),
+                                          wp.array(np.tile(n, (k, 1)).astype(np.float32), dtype=wp.vec3),
+                                          wp.array(np.asarray(tris, np.float32).reshape(-1, 3), dtype=wp.vec3), out])
+    return float(out.numpy().sum())
+
+
+def quad(c0, c1, c2, c3):
+    return [[c0, c1, c2], [c0, c2, c3]]
+
+
+def numeric_ff(p, n, corner, e1, e2, res=800):
+    """Point-to-parallelogram form factor by midpoint quadrature (cosines clamped at 0 on the receiver)."""
+    s = (np.arange(res) + 0.5) / res
+    u, v = np.meshgrid(s, s)
+    q = corner + u[..., None] * e1 + v[..., None] * e2
+    d = q - p
+    r2 = (d ** 2).sum(-1)
+    nq = np.cross(e1, e2)
+    area = np.linalg.norm(nq)
+    nq = nq / area
+    cos_r = np.clip((d @ n) / np.sqrt(r2), 0, None)
+    cos_e = np.abs(d @ nq) / np.sqrt(r2)
+    return float((cos_r * cos_e / (np.pi * r2)).sum() * area / res ** 2)
+
+
+def test_point_under_unit_square_at_height_one_is_exact():
+    tris = quad([-0.5, -0.5, 1], [0.5, -0.5, 1], [0.5, 0.5, 1], [-0.5, 0.5, 1])
+    assert triangles_ff(np.zeros(3), np.array([0, 0, 1.0]), tris) == pytest.approx(0.23946, rel=1e-3)
+
+
+def test_triangle_form_factor_does_not_depend_on_winding():
+    tris = quad([-0.5, -0.5, 1], [0.5, -0.5, 1], [0.5, 0.5, 1], [-0.5, 0.5, 1])
+    flipped = [t[::-1] for t in tris]
+    n = np.array([0, 0, 1.0])
+    assert triangles_ff(np.zeros(3), n, flipped) == pytest.approx(triangles_ff(np.zeros(3), n, tris), rel=1e-6)
+
+
+def test_square_crossing_the_horizon_is_clipped_like_numerical_integration():
+    # A vertical unit square straddling the receiver's tangent plane, off to one side.
+    corner, e1, e2 = np.array([1.0, -0.5, -0.4]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0])
+    n = np.array([0, 0, 1.0])
+    tris = quad(corner, corner + e1, corner + e1 + e2, corner + e2)
+    exact = numeric_ff(np.zeros(3), n, corner, e1, e2)
+    assert exact > 0.01
+    assert triangles_ff(np.zeros(3), n, tris) == pytest.approx(exact, rel=5e-3)
+
+
+def test_square_below_the_horizon_contributes_nothing():
+    tris = quad([-0.5, -0.5, -1], [0.5, -0.5, -1], [0.5, 0.5, -1], [-0.5, 0.5, -1])
+    assert triangles_ff(np.zeros(3), np.array([0, 0, 1.0]), tris) == 0.0
+
+
+def test_coplanar_neighbour_triangle_is_seen_edge_on():
+    tris = [[[0, 0, 0], [1, 0, 0], [0, 1, 0]]]
+    assert triangles_ff(np.array([0.0, 0, 0]), np.array([0, 0, 1.0]), tris) == 0.0
+
+
+@pytest.mark.parametrize("h, radius", [(1.0, 1.0), (2.0, 0.5), (0.5, 3.0)])
+def test_disk_approximation_is_exact_on_axis(h, radius):
+    out = wp.zeros(1, dtype=float, device="cpu")
+    wp.launch(_disk_kernel, dim=1, inputs=[wp.vec3(0, 0, 0), wp.vec3(0, 0, 1), wp.vec3(0, 0, h),
+                                           wp.vec3(0, 0, -1), float(np.pi * radius ** 2), out])
+    assert out.numpy()[0] == pytest.approx(radius ** 2 / (h ** 2 + radius ** 2), rel=1e-5)
+
+
+@pytest.mark.parametrize("ellipse, count, expect", [(0, 4, 0.23946), (1, 256, 0.5)])
+def test_lamp_outline_matches_exact_values(ellipse, count, expect):
+    # unit square 1 m above (F = 0.23946) / disk of radius 1 at height 1 (F = R²/(h²+R²) = 0.5)
+    out = wp.zeros(1, dtype=float, device="cpu")
+    half = 0.5 if ellipse == 0 else 1.0
+    wp.launch(_outline_kernel, dim=1, inputs=[wp.vec3(0, 0, 0), wp.vec3(0, 0, 1), half, half, ellipse, count, out])
+    assert out.numpy()[0] == pytest.approx(expect, rel=1e-3)

@@ -1,0 +1,75 @@
+"""The orchestrator: validation, progress, cancellation, clear errors, content."""
+import threading
+
+import numpy as np
+import pytest
+
+import shapes
+from radiosity_baker.core import BakeCancelled, BakeError, Settings, bake
+from radiosity_baker.core.scene import LAMP_POINT
+
+
+def lit_plane(albedo=(0.5, 0.25, 0.1), emission=(0.0, 0.0, 0.0)):
+    p, n, t = shapes.grid(2.0, 6)
+    return shapes.scene([(p, n, t, albedo, emission)], shapes.lamp(LAMP_POINT, (0, 0, 1), power=(100,) * 3))
+
+
+@pytest.mark.parametrize("field, value", [("method", "magic"), ("content", "nope"), ("light_samples", 0),
+                                          ("tolerance", 0.0), ("attribute", " ")])
+def test_bad_settings_are_rejected_with_the_setting_named(field, value):
+    with pytest.raises(ValueError, match=field if field != "attribute" else "attribute"):
+        Settings(**{field: value}).validate()
+
+
+def test_scene_without_triangles_is_a_clear_error():
+    sc = lit_plane()
+    sc.triangles = sc.triangles[:0]
+    sc.tri_object, sc.albedo, sc.emission = sc.tri_object[:0], sc.albedo[:0], sc.emission[:0]
+    with pytest.raises(BakeError, match="no triangles"):
+        bake(sc, Settings())
+
+
+def test_nan_geometry_is_an_error_naming_the_object():
+    sc = lit_plane()
+    sc.positions[3] = np.nan
+    with pytest.raises(BakeError, match="part0"):
+        bake(sc, Settings())
+
+
+def test_zero_area_triangles_are_ignored_with_a_warning():
+    sc = lit_plane()
+    sc.triangles = np.concatenate([sc.triangles, [[0, 0, 1]]]).astype(np.int32)
+    sc.tri_object = np.append(sc.tri_object, 0).astype(np.int32)
+    sc.albedo = np.concatenate([sc.albedo, sc.albedo[:1]])
+    sc.emission = np.concatenate([sc.emission, sc.emission[:1]])
+    r = bake(sc, Settings(method="direct"))
+    assert any("zero-area" in w and "part0" in w for w in r.warnings)
+    assert np.isfinite(r.lighting).all()
+
+
+def test_progress_is_reported_per_stage_and_timings_returned():
+    seen = []
+    r = bake(lit_plane(), Settings(method="bruteforce"), progress=lambda s, f: seen.append((s, f)))
+    stages = [s for s, _ in seen]
+    for stage in ("elements", "direct", "solve"):
+        assert stage in stages and stage in r.timings
+    assert all(0.0 <= f <= 1.0 for _, f in seen)
+    assert r.counts["elements"] == 49 and r.counts["rays"] > 0
+
+
+def test_cancel_stops_the_bake():
+    cancel = threading.Event()
+
+    def progress(stage, f):
+        if stage == "direct":
+            cancel.set()
+
+    with pytest.raises(BakeCancelled):
+        bake(lit_plane(), Settings(), progress=progress, cancel=cancel)
+
+
+def test_combined_is_emission_plus_albedo_times_lighting():
+    sc = lit_plane(albedo=(0.5, 0.25, 0.1), emission=(0.3, 0.0, 0.0))
+    lighting = bake(sc, Settings(method="direct")).output
+    combined = bake(sc, Settings(method="direct", content="combined")).output
+    np.testing.assert_allclose(combined, np.array([0.3, 0, 0]) + np.array([0.5, 0.25, 0.1]) * lighting, rtol=1e-5)
