@@ -1,0 +1,137 @@
+"""Direct light against Cycles: one lamp type at a time over a grid plane with a shadow-casting cube.
+
+Our value: the ``direct`` method through extraction, the pipeline and writing the color attribute.
+Cycles': a DIFFUSE bake with the Direct pass only (no Color), i.e. irradiance/π from lamps and
+emissive meshes. Measured figures are printed and written to bench/results/direct_vs_cycles.json.
+"""
+import json
+import math
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
+from radiosity_baker.addon.extract import extract_scene
+from radiosity_baker.addon.write import write_color_attributes
+from radiosity_baker.core import Settings, bake
+
+RESULTS = Path(__file__).resolve().parents[2] / "bench" / "results" / "direct_vs_cycles.json"
+TOLERANCE = 0.03        # relative RMSE, per lamp type
+CYCLES_SAMPLES = 1024
+LIGHT_SAMPLES = 64
+PLANE_CUTS = 20         # 20×20 quads, 441 vertices
+
+
+def _mesh(name, location=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), *, cuts=0, size=2.0,
+          kind="plane", material=None):
+    """Add a plane (``cuts``×``cuts`` quads) or cube of edge ``size`` (m); return the object."""
+    if kind == "plane":
+        bpy.ops.mesh.primitive_grid_add(x_subdivisions=cuts, y_subdivisions=cuts, size=size,
+                                        location=location, rotation=rotation)
+    else:
+        bpy.ops.mesh.primitive_cube_add(size=size, location=location, rotation=rotation)
+    ob = bpy.context.object
+    ob.name = name
+    if material is not None:
+        ob.data.materials.append(material)
+    return ob
+
+
+def _lamp(kind, location, rotation_deg=(0.0, 0.0, 0.0), **settings):
+    data = bpy.data.lights.new(kind.title(), kind)
+    for key, value in settings.items():
+        setattr(data, key, value)
+    ob = bpy.data.objects.new(kind.title(), data)
+    ob.location = location
+    ob.rotation_euler = [math.radians(a) for a in rotation_deg]
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def _emissive_material(strength):
+    mat = bpy.data.materials.new("Emitter")
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bsdf.inputs["Emission Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    bsdf.inputs["Emission Strength"].default_value = strength
+    return mat
+
+
+# Each case adds its light source above the receiver plane (z = 0, 2 m wide) and the occluder cube
+# (0.4 m at z = 0.7), placed so the shadow and, for the spot, the cone's edge fall on the plane.
+CASES = {
+    "point": lambda: _lamp("POINT", (0.3, 0.2, 2.0), energy=200.0, shadow_soft_size=0.05),
+    "spot": lambda: _lamp("SPOT", (0.0, 0.0, 2.5), (12.0, 0.0, 0.0), energy=600.0,
+                          shadow_soft_size=0.05, spot_size=math.radians(45.0), spot_blend=0.3),
+    "sun": lambda: _lamp("SUN", (0.0, 0.0, 3.0), (25.0, 10.0, 0.0), energy=3.0,
+                         angle=math.radians(5.0)),
+    "area_rectangle": lambda: _lamp("AREA", (0.2, 0.0, 1.8), (15.0, 0.0, 0.0), energy=150.0,
+                                    shape="RECTANGLE", size=0.6, size_y=0.3),
+    "area_disk": lambda: _lamp("AREA", (0.0, 0.2, 1.8), (0.0, 15.0, 0.0), energy=150.0, shape="DISK",
+                               size=0.5),
+    "emissive_quad": lambda: _mesh("Emitter", (0.1, 0.1, 1.6), (math.pi, 0.0, 0.0), size=0.4,
+                                   material=_emissive_material(10.0)),
+}
+
+
+def _relative_rmse(ours: np.ndarray, reference: np.ndarray) -> float:
+    """sqrt(mean |a − b|²) / mean |b| over vertices (|·|: Euclidean norm of the RGB triple)."""
+    err = np.linalg.norm(ours - reference, axis=1)
+    return float(np.sqrt(np.mean(err ** 2)) / np.mean(np.linalg.norm(reference, axis=1)))
+
+
+def _our_direct(receiver_name: str) -> np.ndarray:
+    """float32[V,3]: our direct lighting per original vertex of the receiver, via the color attribute."""
+    receiver = bpy.data.objects[receiver_name]
+    extraction = extract_scene(bpy.context.evaluated_depsgraph_get(), receivers=[receiver])
+    settings = Settings(method="direct", content="lighting", attribute="Ours",
+                        light_samples=LIGHT_SAMPLES, device="cpu")
+    result = bake(extraction.scene, settings)
+    write_color_attributes(extraction, result.output, settings.attribute, settings)
+    rgba = np.empty(len(receiver.data.vertices) * 4, np.float32)
+    receiver.data.color_attributes[settings.attribute].data.foreach_get("color", rgba)
+    return rgba.reshape(-1, 4)[:, :3]
+
+
+def _record(case: str, figures: dict) -> None:
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    table = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
+    table[case] = figures
+    RESULTS.write_text(json.dumps(table, indent=2, sort_keys=True) + "\n")
+
+
+def test_cycles_harness_reads_sun_irradiance_over_pi(empty_scene):
+    """A sun of strength S straight above a plane gives S/π with the Direct pass (DESIGN.md Units)."""
+    strength = 2.5
+    _mesh("Receiver", cuts=2, size=0.5)
+    _lamp("SUN", (0.0, 0.0, 2.0), energy=strength, angle=0.0)
+    baked = cycles_bake_vertex_colors(["Receiver"], passes=("DIRECT",), samples=16)["Receiver"]
+    assert baked.shape == (9, 3)
+    np.testing.assert_allclose(baked, strength / math.pi, rtol=1e-3)
+    # The harness leaves nothing behind.
+    assert "CyclesRef" not in bpy.data.objects["Receiver"].data.attributes
+    assert empty_scene.render.engine != "CYCLES"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_direct_light_matches_cycles(empty_scene, case):
+    receiver = _mesh("Receiver", cuts=PLANE_CUTS, size=2.0)
+    _mesh("Occluder", (0.1, 0.05, 0.7), size=0.4, kind="cube")
+    CASES[case]()
+    assert len(receiver.data.vertices) == (PLANE_CUTS + 1) ** 2
+
+    reference = cycles_bake_vertex_colors(["Receiver"], passes=("DIRECT",),
+                                          samples=CYCLES_SAMPLES)["Receiver"]
+    ours = _our_direct("Receiver")
+    rmse = _relative_rmse(ours, reference)
+    ratio = float(ours.sum() / reference.sum())
+    print(f"\n{case}: relative RMSE {rmse:.4f}, mean ours/Cycles {ratio:.4f}, "
+          f"Cycles mean {reference.mean():.4f}")
+    _record(case, {"relative_rmse": round(rmse, 5), "mean_ratio": round(ratio, 5),
+                   "cycles_samples": CYCLES_SAMPLES, "light_samples": LIGHT_SAMPLES,
+                   "vertices": int(reference.shape[0])})
+    assert reference.mean() > 0.01, "the lamp does not reach the receiver"
+    assert rmse <= TOLERANCE, f"{case}: relative RMSE {rmse:.4f} > {TOLERANCE}"
