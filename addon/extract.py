@@ -125,14 +125,15 @@ class _Materials:
         if shader is None:
             self._warn(f"material {mat.name} has no surface shader: its viewport colour is used")
             return fallback
+        black = (0.0, 0.0, 0.0)
         if shader.type == "BSDF_PRINCIPLED":
-            return _Shading(self._colour(mat, shader.inputs["Base Color"]),
-                            self._colour(mat, shader.inputs["Emission Color"]),
-                            float(shader.inputs["Emission Strength"].default_value))
+            strength = float(shader.inputs["Emission Strength"].default_value)
+            emission = self._colour(mat, shader.inputs["Emission Color"]) if strength else black
+            return _Shading(self._colour(mat, shader.inputs["Base Color"]), emission, strength)
         if shader.type == "BSDF_DIFFUSE":
-            return _Shading(self._colour(mat, shader.inputs["Color"]), (0.0, 0.0, 0.0), 0.0)
+            return _Shading(self._colour(mat, shader.inputs["Color"]), black, 0.0)
         if shader.type == "EMISSION":
-            return _Shading((0.0, 0.0, 0.0), self._colour(mat, shader.inputs["Color"]),
+            return _Shading(black, self._colour(mat, shader.inputs["Color"]),
                             float(shader.inputs["Strength"].default_value))
         self._warn(f"material {mat.name} uses a {shader.bl_label} shader, which the baker does not "
                    f"read: its viewport colour is used")
@@ -211,8 +212,8 @@ class _Materials:
             return np.asarray(colour, np.float32)
         name = colour.uv_map or _render_uv_name(me)
         if name is None or name not in me.uv_layers:
-            self._warn(f"object {object_name} has no UV map {colour.uv_map or ''}".rstrip()
-                       + ": the image's mean colour is used")
+            missing = f"UV map {colour.uv_map}" if colour.uv_map else "UV map"
+            self._warn(f"object {object_name} has no {missing}: the image's mean colour is used")
             return colour.pixels.reshape(-1, 3).mean(axis=0)
         if name not in uv_cache:
             uv = np.empty(len(me.loops) * 2, np.float32)
@@ -467,6 +468,7 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
             if _is_copy_of_rendered(original, collections, receiver_names):
                 continue
             name = original.name
+            _warn_viewport_modifiers(original, warnings)
         # Instances are only valid inside this loop: copy the matrix now.
         matrix = np.array(inst.matrix_world, np.float64)
 
@@ -524,6 +526,18 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
                       tri_object=tri_object, albedo=cat(3), emission=cat(4),
                       lamps=_lamps(lamp_items), object_names=names)
     return Extraction(scene=scene, targets=targets, warnings=warnings)
+
+
+def _warn_viewport_modifiers(ob, warnings: list) -> None:
+    """The depsgraph evaluates modifiers with their viewport settings: say where a render differs."""
+    for mod in ob.modifiers:
+        if mod.show_viewport != mod.show_render:
+            state = "on" if mod.show_viewport else "off"
+            warnings.append(f"{ob.name}: modifier {mod.name} is {state} in the viewport but not in "
+                            f"renders: baked as the viewport shows it")
+        elif mod.show_viewport and getattr(mod, "levels", None) != getattr(mod, "render_levels", None):
+            warnings.append(f"{ob.name}: modifier {mod.name} has {mod.levels} viewport levels and "
+                            f"{mod.render_levels} render levels: baked with the viewport's")
 
 
 def _is_copy_of_rendered(ob, collections: set, receiver_names) -> bool:

@@ -69,6 +69,16 @@ def test_modifiers_give_evaluated_positions():
     assert not next(t for t in ex.targets if t.object_name == "Plane").topology_changed
 
 
+def test_modifier_settings_differing_from_render_are_reported():
+    ob = mesh_object("Plane")
+    ob.modifiers.new("Smooth", "SUBSURF").render_levels = 3
+    ob.modifiers.new("Bend", "SIMPLE_DEFORM").show_render = False
+    ex = extract()
+    assert ex.warnings[:2] == [
+        "Plane: modifier Smooth has 1 viewport levels and 3 render levels: baked with the viewport's",
+        "Plane: modifier Bend is on in the viewport but not in renders: baked as the viewport shows it"]
+
+
 def test_armature_pose_gives_posed_positions():
     arm = bpy.data.armatures.new("Arm")
     rig = bpy.data.objects.new("Rig", arm)
@@ -222,6 +232,20 @@ def test_image_texture_on_base_color_gives_the_texel_colours_under_each_triangle
     centre_x = s.positions[s.triangles].mean(axis=1)[:, 0]
     np.testing.assert_allclose(s.albedo[centre_x < 1], [[1, 0, 0]] * 2)
     np.testing.assert_allclose(s.albedo[centre_x > 1], [[0, 1, 0]] * 2)
+
+
+def test_byte_srgb_image_without_uvs_gives_its_linear_mean_colour():
+    image = bpy.data.images.new("Byte", 2, 2)  # 8-bit, sRGB
+    image.pixels.foreach_set(np.tile(np.array([0.5, 0.5, 0.5, 1], np.float32), 4))
+    mat = material("Textured")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs[0])
+    mesh_object("Plain").data.materials.append(mat)
+    ex = extract()
+    stored = round(0.5 * 255) / 255  # the byte the image keeps
+    np.testing.assert_allclose(ex.scene.albedo, ((stored + 0.055) / 1.055) ** 2.4, rtol=1e-5)
+    assert "object Plain has no UV map: the image's mean colour is used" in ex.warnings
 
 
 def lamp(name, kind, **props):
