@@ -49,24 +49,38 @@ def _parser() -> argparse.ArgumentParser:
     bake = commands.add_parser("bake", help="bake FILE.blend (the file itself is left unchanged)")
     defaults = Settings()
     bake.add_argument("blend", metavar="FILE.blend", help="the .blend file to bake")
-    bake.add_argument("--method", choices=core_settings.METHODS, default=defaults.method)
-    bake.add_argument("--content", choices=core_settings.CONTENTS, default=defaults.content)
-    bake.add_argument("--target", choices=core_settings.TARGETS, default=defaults.target)
+    bake.add_argument("--method", choices=core_settings.METHODS, default=defaults.method,
+                      help="direct: lamps and emitters only; bruteforce: plus indirect "
+                           "bounces (default: %(default)s)")
+    bake.add_argument("--content", choices=core_settings.CONTENTS, default=defaults.content,
+                      help="lighting (irradiance/π), combined (emission + albedo × lighting) or "
+                           "indirect lighting only (default: %(default)s)")
+    bake.add_argument("--target", choices=core_settings.TARGETS, default=defaults.target,
+                      help="where results go (default: %(default)s)")
     bake.add_argument("--attribute", metavar="NAME", default=defaults.attribute,
-                      help="color attribute written (default %(default)s)")
-    bake.add_argument("--device", choices=core_settings.DEVICES, default=defaults.device)
+                      help="color attribute written, the only one ever overwritten "
+                           "(default: %(default)s)")
+    bake.add_argument("--device", choices=core_settings.DEVICES, default=defaults.device,
+                      help="auto: CUDA when usable, else the CPU (default: %(default)s)")
     bake.add_argument("--objects", metavar="A,B", type=lambda s: [n for n in s.split(",") if n],
                       help="names of the objects to write (default: every mesh); all objects "
                            "still cast and reflect light")
     bake.add_argument("--samples", dest="light_samples", metavar="N", type=_positive_int,
-                      default=defaults.light_samples, help="shadow samples per light and receiver")
+                      default=defaults.light_samples,
+                      help="shadow samples per light and receiver (default: %(default)s)")
     bake.add_argument("--rays", dest="visibility_rays", metavar="N", type=_positive_int,
                       default=defaults.visibility_rays,
-                      help="visibility rays per element pair (bruteforce)")
-    bake.add_argument("--bounces", metavar="N", type=_positive_int, default=defaults.bounces)
-    bake.add_argument("--tolerance", type=float, default=defaults.tolerance)
-    bake.add_argument("--max-pairs", metavar="N", type=_positive_int, default=defaults.max_pairs)
-    bake.add_argument("--seed", type=int, default=defaults.seed)
+                      help="visibility rays per element pair (bruteforce) (default: %(default)s)")
+    bake.add_argument("--bounces", metavar="N", type=_positive_int, default=defaults.bounces,
+                      help="maximum indirect bounces (bruteforce) (default: %(default)s)")
+    bake.add_argument("--tolerance", metavar="X", type=float, default=defaults.tolerance,
+                      help="stop bouncing when the largest relative change is below this "
+                           "(default: %(default)s)")
+    bake.add_argument("--max-pairs", metavar="N", type=_positive_int, default=defaults.max_pairs,
+                      help="memory budget of the bruteforce transport, in element pairs "
+                           "(default: %(default)s)")
+    bake.add_argument("--seed", metavar="N", type=int, default=defaults.seed,
+                      help="random seed of the sample jitter (default: %(default)s)")
     bake.add_argument("--bake-copy", action="store_true",
                       help="bake objects whose modifiers change their topology into a new "
                            "object <name>_baked instead of skipping them")

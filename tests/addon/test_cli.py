@@ -12,7 +12,7 @@ import pytest
 from radiosity_baker.addon import cli
 from radiosity_baker.addon.preview import render_preview
 
-from scenes import GROUND, LIT, SHADOW, UNDER_LAMP, lit_ground, snapshot, value_at
+from scenes import GROUND, LIT, SHADOW, lit_ground, snapshot, value_at
 
 FAST = ["--method", "direct", "--samples", "4"]
 

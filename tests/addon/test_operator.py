@@ -3,7 +3,6 @@ import threading
 from dataclasses import fields
 
 import bpy
-import numpy as np
 import pytest
 
 from radiosity_baker.addon.job import BakeJob
@@ -33,6 +32,11 @@ def test_execute_bakes_lit_plane_into_float_color_point_attribute(lit_scene):
     assert shadow.mean() < 0.05 * lit.mean()  # same distance as LIT, behind the occluder
     stats = lit_scene.radiosity_baker.last_bake
     assert stats.device and stats.elements > 0 and stats.seconds > 0
+
+
+def test_invoke_without_a_window_bakes_synchronously(lit_scene):
+    assert bpy.ops.object.radiosity_bake('INVOKE_DEFAULT') == {'FINISHED'}
+    assert "Lighting" in bpy.data.objects[GROUND].data.attributes
 
 
 def test_execute_with_selection_writes_only_selected_meshes(lit_scene):
