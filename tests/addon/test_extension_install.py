@@ -44,9 +44,12 @@ def test_installed_extension_bakes(tmp_path):
                           text=True, timeout=600)
     assert proc.returncode == 0, f"child failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     report = json.loads((tmp_path / "r.json").read_text())
-    # The bake ran through the installed copy, from the user folder, with the bundled wheel.
+    # The bake ran through the installed copy, from the user folder, whose bundled wheels Blender
+    # installed there too.
     assert report["module"] == f"bl_ext.{REPO_NAME}.radiosity_baker"
     assert Path(report["module_file"]).is_relative_to(user)
+    assert list(user.glob("**/site-packages/warp_lang-1.19.0.dist-info"))
+    assert list(user.glob("**/site-packages/xatlas-0.0.11.dist-info"))
     assert Path(report["warp_cache"]).is_relative_to(user)
     assert report["vertices"] == 81
     assert report["finite"]
