@@ -78,6 +78,12 @@ def test_without_save_nothing_is_written(lit_blend):
     assert lit_blend.read_bytes() == original
 
 
+def test_save_may_name_the_input_explicitly(lit_blend):
+    assert cli.main(["bake", str(lit_blend), *FAST, "--save", str(lit_blend)]) == 0
+    bpy.ops.wm.open_mainfile(filepath=str(lit_blend))
+    assert "Lighting" in bpy.data.objects[GROUND].data.attributes
+
+
 def test_missing_blend_is_a_one_line_error(tmp_path, capsys):
     assert cli.main(["bake", str(tmp_path / "missing.blend")]) == 2
     assert "missing.blend" in one_error_line(capsys)

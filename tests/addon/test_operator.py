@@ -1,6 +1,7 @@
 """The operator, the BakeJob behind it, the scene properties and the panel, on the real pipeline."""
 import threading
 from dataclasses import fields
+from types import SimpleNamespace
 
 import bpy
 import pytest
@@ -138,6 +139,38 @@ def test_panel_is_in_render_properties_for_every_engine(empty_scene):
         assert panel.poll(bpy.context), engine
         shown.append(engine)
     assert {"CYCLES", "BLENDER_WORKBENCH"} <= set(shown) and len(shown) >= 3
+
+
+class RecordingLayout:
+    """Stands in for UILayout (the bpy module cannot draw): records what a panel asks to show."""
+
+    def __init__(self, shown):
+        self.shown = shown
+
+    def column(self, **kwargs):
+        return self
+
+    row = box = column
+
+    def prop(self, data, name, **kwargs):
+        assert hasattr(data, name), name
+        self.shown.append(name)
+
+    def operator(self, idname, **kwargs):
+        self.shown.append(idname)
+
+    def label(self, text="", **kwargs):
+        self.shown.append(text)
+
+
+def test_panels_draw_every_setting_the_bake_button_and_last_stats(lit_scene):
+    assert bpy.ops.object.radiosity_bake() == {'FINISHED'}
+    shown = []
+    for panel in (bpy.types.RENDER_PT_radiosity_bake, bpy.types.RENDER_PT_radiosity_bake_advanced):
+        panel.draw(SimpleNamespace(layout=RecordingLayout(shown)), bpy.context)
+    assert {f.name for f in fields(Settings)} <= set(shown)
+    assert "object.radiosity_bake" in shown
+    assert any(line.startswith("Last bake:") for line in shown)
 
 
 def test_operator_refuses_to_start_without_changing_anything_on_bad_settings(lit_scene):
