@@ -14,6 +14,7 @@ import platform
 import sys
 import tempfile
 import time
+from dataclasses import fields
 from pathlib import Path
 
 import bpy
@@ -93,10 +94,10 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
+def main(argv: list[str]) -> int:
     """Run the command line with ``argv`` (without the program name); returns the exit status."""
     try:
-        args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
+        args = _parser().parse_args(argv)
     except UsageError as exc:
         return _error(str(exc), 2)
     except SystemExit as exc:  # --help
@@ -114,8 +115,7 @@ def main(argv=None) -> int:
 
 
 def _bake(args) -> int:
-    settings = Settings(**{k: v for k, v in vars(args).items()
-                           if k in Settings.__dataclass_fields__})
+    settings = Settings(**{f.name: getattr(args, f.name) for f in fields(Settings)})
     try:
         settings.validate()
     except ValueError as exc:
