@@ -51,7 +51,7 @@ def _parser() -> argparse.ArgumentParser:
     defaults = Settings()
     bake.add_argument("blend", metavar="FILE.blend", help="the .blend file to bake")
     bake.add_argument("--method", choices=core_settings.METHODS, default=defaults.method,
-                      help="direct: lamps and emitters only; bruteforce: plus indirect "
+                      help="direct: lamps and emitters only; the others add indirect "
                            "bounces (default: %(default)s)")
     bake.add_argument("--content", choices=core_settings.CONTENTS, default=defaults.content,
                       help="lighting (irradiance/π), combined (emission + albedo × lighting) or "
@@ -71,14 +71,14 @@ def _parser() -> argparse.ArgumentParser:
                       help="shadow samples per light and receiver (default: %(default)s)")
     bake.add_argument("--rays", dest="visibility_rays", metavar="N", type=_positive_int,
                       default=defaults.visibility_rays,
-                      help="visibility rays per element pair (bruteforce) (default: %(default)s)")
+                      help="visibility rays per element pair (default: %(default)s)")
     bake.add_argument("--bounces", metavar="N", type=_positive_int, default=defaults.bounces,
-                      help="maximum indirect bounces (bruteforce) (default: %(default)s)")
+                      help="maximum indirect bounces (default: %(default)s)")
     bake.add_argument("--tolerance", metavar="X", type=float, default=defaults.tolerance,
                       help="stop bouncing when the largest relative change is below this "
                            "(default: %(default)s)")
     bake.add_argument("--max-pairs", metavar="N", type=_positive_int, default=defaults.max_pairs,
-                      help="memory budget of the bruteforce transport, in element pairs "
+                      help="memory budget of the all-pairs transport, in element pairs "
                            "(default: %(default)s)")
     bake.add_argument("--seed", metavar="N", type=int, default=defaults.seed,
                       help="random seed of the sample jitter (default: %(default)s)")

@@ -31,7 +31,7 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(s, "light_samples")
         sub = col.column(align=True)
-        sub.active = s.method == "bruteforce"
+        sub.active = s.method != "direct"  # only the methods with indirect light use these
         sub.prop(s, "visibility_rays")
         sub.prop(s, "bounces")
         layout.prop(s, "bake_copy")
@@ -59,7 +59,7 @@ class RENDER_PT_radiosity_bake_advanced(bpy.types.Panel):
         layout.use_property_decorate = False
         s = context.scene.radiosity_baker
         col = layout.column()
-        col.active = s.method == "bruteforce"
+        col.active = s.method != "direct"
         col.prop(s, "tolerance")
         col.prop(s, "max_pairs")
         layout.prop(s, "seed")

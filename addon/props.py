@@ -15,7 +15,9 @@ _DEFAULTS = Settings()
 # One line per choice for the UI tooltips; the choices themselves come from core.settings.
 _ITEM_DESCRIPTIONS = {
     "direct": "Lamps and emissive surfaces only, with shadows (fast)",
-    "bruteforce": "Direct light plus multi-bounce indirect light, all element pairs (small scenes)",
+    "reference": "Direct light plus multi-bounce indirect light, all element pairs with ray-cast "
+                 "visibility (ground truth, small scenes)",
+    "bruteforce": "Older name of Reference",
     "lighting": "Light arriving at the surface (irradiance/π), without the surface colour",
     "combined": "Emission + surface colour × lighting: what the surface looks like",
     "indirect": "Only the light that bounced off other surfaces",

@@ -47,11 +47,12 @@ def test_execute_with_selection_writes_only_selected_meshes(lit_scene):
     assert "Lighting" not in bpy.data.objects[GROUND].data.attributes
 
 
-def test_execute_bruteforce_bakes_light_reflected_by_the_ground(lit_scene):
+@pytest.mark.parametrize("method", [m for m in core_settings.METHODS if m != "direct"])
+def test_execute_bakes_light_reflected_by_the_ground(lit_scene, method):
     # Turned to face the ground, the occluder sees no lamp: all its light bounced off the ground.
     bpy.data.objects[OCCLUDER].data.flip_normals()
-    fast_settings(lit_scene, method="bruteforce", content="indirect", attribute="Indirect",
-                  bounces=2, visibility_rays=1)
+    fast_settings(lit_scene, method=method, content="indirect", attribute="Indirect", bounces=2,
+                  visibility_rays=1)
     assert bpy.ops.object.radiosity_bake() == {'FINISHED'}
     underside = vertex_colors(bpy.data.objects[OCCLUDER].data, "Indirect")[:, :3]
     # Grey 0.8 ground, lit about 1 to 3 over the part the underside sees.
