@@ -115,6 +115,16 @@ def test_cycles_harness_reads_sun_irradiance_over_pi(empty_scene):
     assert empty_scene.render.engine != "CYCLES"
 
 
+def test_cycles_harness_ao_is_unoccluded_fraction(empty_scene):
+    """AO: 1 for a lone plane, about 0 under a large plane facing it (within the AO distance)."""
+    _mesh("Receiver", cuts=2, size=0.5)
+    open_sky = cycles_bake_vertex_colors(["Receiver"], bake_type="AO", samples=16)["Receiver"]
+    np.testing.assert_allclose(open_sky, 1.0)
+    _mesh("Cover", (0.0, 0.0, 0.5), (math.pi, 0.0, 0.0), size=50.0)
+    covered = cycles_bake_vertex_colors(["Receiver"], bake_type="AO", samples=64)["Receiver"]
+    assert covered.max() < 0.05
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_direct_light_matches_cycles(empty_scene, case):
