@@ -72,6 +72,7 @@ def fetch_wheels(platforms: tuple[str, ...]) -> None:
         target = REPO / wheel
         name, version, python_tag, abi_tag, platform_tags = target.stem.split("-")
         cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", "--only-binary=:all:",
+               "--retries", "2", "--timeout", "30",
                "--dest", str(target.parent), f"{name}=={version}", "--abi", abi_tag]
         for tag in platform_tags.split("."):
             cmd += ["--platform", tag]
