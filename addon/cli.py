@@ -50,7 +50,8 @@ def _parser() -> argparse.ArgumentParser:
     bake = commands.add_parser("bake", help="bake FILE.blend (the file itself is left unchanged)")
     defaults = Settings()
     bake.add_argument("blend", metavar="FILE.blend", help="the .blend file to bake")
-    bake.add_argument("--method", choices=core_settings.METHODS, default=defaults.method,
+    bake.add_argument("--method", choices=core_settings.METHODS + tuple(core_settings.METHOD_ALIASES),
+                      default=defaults.method,
                       help="direct: lamps and emitters only; the others add indirect "
                            "bounces (default: %(default)s)")
     bake.add_argument("--content", choices=core_settings.CONTENTS, default=defaults.content,

@@ -17,7 +17,6 @@ _ITEM_DESCRIPTIONS = {
     "direct": "Lamps and emissive surfaces only, with shadows (fast)",
     "reference": "Direct light plus multi-bounce indirect light, all element pairs with ray-cast "
                  "visibility (ground truth, small scenes)",
-    "bruteforce": "Older name of Reference",
     "lighting": "Light arriving at the surface (irradiance/π), without the surface colour",
     "combined": "Emission + surface colour × lighting: what the surface looks like",
     "indirect": "Only the light that bounced off other surfaces",

@@ -136,14 +136,15 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
             cos_r = wp.dot(n, w)
             if cos_r <= 0.0:
                 continue
-            att = _spot_factor(kind, -w, lamp_dir[l], lamp_cos_half[l], lamp_smooth[l])
-            if att <= 0.0:
-                continue
             radius = lamp_size[l][0]
-            vis = float(0.0)
+            # shadowed cone attenuation, averaged over the lamp: Cycles applies the spot cone to
+            # each sampled point of a sphere lamp, which widens the blend band by ~asin(r/d)
+            lit = float(0.0)
             if radius <= 0.0:
-                vis = _visible(mesh, origin, lamp_pos[l])
-                nrays += 1
+                att = _spot_factor(kind, -w, lamp_dir[l], lamp_cos_half[l], lamp_smooth[l])
+                if att > 0.0:
+                    lit = att * _visible(mesh, origin, lamp_pos[l])
+                    nrays += 1
             else:
                 t1, t2 = tangent_frame(w)
                 for k in range(count):
@@ -152,11 +153,14 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
                     r = radius * wp.sqrt(su)
                     phi = 6.283185307179586 * sv
                     q = lamp_pos[l] + t1 * (r * wp.cos(phi)) + t2 * (r * wp.sin(phi))
-                    vis += _visible(mesh, origin, q)
-                vis = vis / float(count)
-                nrays += count
+                    att = _spot_factor(kind, wp.normalize(p - q), lamp_dir[l], lamp_cos_half[l],
+                                       lamp_smooth[l])
+                    if att > 0.0:
+                        lit += att * _visible(mesh, origin, q)
+                        nrays += 1
+                lit = lit / float(count)
             # intensity P/4π W/sr → irradiance I·cos/d² → lighting = irradiance/π
-            total += power * (att * vis * cos_r / (4.0 * 3.141592653589793 * 3.141592653589793 * d2))
+            total += power * (lit * cos_r / (4.0 * 3.141592653589793 * 3.141592653589793 * d2))
         elif kind == LAMP_SUN:
             w = -lamp_dir[l]
             cos_r = wp.dot(n, w)

@@ -10,12 +10,16 @@ import numpy as np
 
 from .scene import SceneData
 
+# Fraction of the way from a vertex towards the centre of its triangle fan its receiver point moves.
+NUDGE = 0.01
+
 
 @dataclass
 class Elements:
     """n disks.
 
-    position, normal: float32[n,3] (m, unit). area: float32[n] (m²), a third of the adjacent
+    position, normal: float32[n,3] (m, unit); the position is the vertex moved 1 % towards the
+    centre of its triangle fan (see NUDGE). area: float32[n] (m²), a third of the adjacent
     triangles' area. albedo, emission: float32[n,3], area-weighted means over adjacent triangles
     (emission in radiance units). fan_offsets: int32[n+1] and fan_triangles: int32[3T] list, per
     element, the triangles it is a corner of (CSR), for exact near-field form factors.
@@ -49,12 +53,20 @@ def build(scene: SceneData) -> Elements:
         acc = np.stack([np.bincount(corners, weights=per_corner[:, c], minlength=n) for c in range(3)], axis=1)
         return acc / np.where(area > 0, area, 1.0)[:, None]
 
+    # Receivers sit a hair inside their own fan: a vertex on the edge where a wall meets the floor
+    # lies in the wall's plane and would see it edge-on (F = 0), while the lighting there is the
+    # limit from the surface's interior (what Cycles' offset rays see).
+    p = scene.positions.astype(np.float64)
+    centroid = p[tris].mean(axis=1)
+    fan_centre = weighted(centroid)
+    position = np.where(area[:, None] > 0, p + NUDGE * (fan_centre - p), p)
+
     order = np.argsort(corners, kind="stable")
     fan_triangles = (order // 3).astype(np.int32)
     fan_offsets = np.zeros(n + 1, np.int32)
     np.cumsum(np.bincount(corners, minlength=n), out=fan_offsets[1:])
     return Elements(
-        position=np.ascontiguousarray(scene.positions, np.float32),
+        position=position.astype(np.float32),
         normal=np.ascontiguousarray(scene.normals, np.float32),
         area=area.astype(np.float32),
         albedo=weighted(scene.albedo).astype(np.float32),

@@ -72,7 +72,7 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     """
     from . import device as device_mod
     from . import direct, elements
-    from .solvers import bruteforce
+    from .solvers import reference
 
     settings.validate()
     try:
@@ -103,11 +103,11 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
               "vertices": scene.num_vertices, "elements": els.count, "lamps": len(scene.lamps),
               "emissive_triangles": int(geometry.num_emitters), "rays": int(direct_rays)}
 
-    if settings.method == "bruteforce":
+    if settings.solver == "reference":
         def solve_progress(stage, f):
             stages.report(stage, f)
 
-        solution = stages.run("solve", bruteforce.solve, geometry, els, lit_direct, settings, dev,
+        solution = stages.run("solve", reference.solve, geometry, els, lit_direct, settings, dev,
                               solve_progress)
         indirect = solution.indirect
         solver_counts = dict(solution.counts)

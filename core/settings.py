@@ -3,7 +3,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-METHODS = ("direct", "bruteforce")
+METHODS = ("direct", "reference")
+# Older name of the reference solver, still accepted.
+METHOD_ALIASES = {"bruteforce": "reference"}
 CONTENTS = ("lighting", "combined", "indirect")
 TARGETS = ("vertex_colors",)
 DEVICES = ("auto", "cpu", "cuda")
@@ -13,25 +15,26 @@ DEVICES = ("auto", "cpu", "cuda")
 class Settings:
     """Bake settings.
 
-    method: ``direct`` (lamps and emissive triangles only) or ``bruteforce`` (all-pairs multi-bounce
-        gather with ray-cast visibility, O(n²), small scenes).
+    method: ``direct`` (lamps and emissive triangles only) or ``reference`` (all-pairs multi-bounce
+        radiosity with ray-cast visibility, O(n²), small scenes; ``bruteforce`` is the same).
     content: ``lighting`` (irradiance/π, Cycles DIFFUSE Direct+Indirect without Color),
         ``combined`` (emission + albedo × lighting) or ``indirect`` (lighting minus direct).
     target: where results go (``vertex_colors``).
     attribute: name of the color attribute written (only that exact name is ever overwritten).
     device: ``auto`` (CUDA when usable, else CPU), ``cpu`` or ``cuda``.
     light_samples: stratified shadow samples per lamp / emissive triangle and receiver (soft shadows).
-    visibility_rays: rays per element pair in the bruteforce gather (jittered over the sender disk).
-    bounces: maximum number of indirect bounces (bruteforce).
+    visibility_rays: rays per element pair in the reference gather (jittered over the sender disk).
+    bounces: maximum number of indirect bounces (reference).
     tolerance: stop iterating when the largest change of indirect lighting, relative to the largest
         value, falls below this.
-    max_pairs: memory budget of the bruteforce transport matrix, in element pairs (4 bytes each).
+    max_pairs: memory budget of the reference transport, in element pairs (4 bytes each): the whole
+        matrix is kept while n² fits, else rows are recomputed in blocks on each sweep.
     seed: random seed of sample jitter (results are deterministic for a given seed).
     bake_copy: when an object's modifiers change its vertex count, bake into a new object
         ``<name>_baked`` holding the evaluated mesh instead of skipping the object with a message.
     """
 
-    method: str = "bruteforce"
+    method: str = "reference"
     content: str = "lighting"
     target: str = "vertex_colors"
     attribute: str = "Lighting"
@@ -40,13 +43,13 @@ class Settings:
     visibility_rays: int = 4
     bounces: int = 64
     tolerance: float = 1e-4
-    max_pairs: int = 64_000_000
+    max_pairs: int = 16_000_000
     seed: int = 1
     bake_copy: bool = False
 
     def validate(self) -> "Settings":
         """Raise ValueError with a clear message for an out-of-range setting; return self."""
-        for name, allowed in (("method", METHODS), ("content", CONTENTS), ("target", TARGETS),
+        for name, allowed in (("method", METHODS + tuple(METHOD_ALIASES)), ("content", CONTENTS), ("target", TARGETS),
                               ("device", DEVICES)):
             value = getattr(self, name)
             if value not in allowed:
@@ -59,6 +62,11 @@ class Settings:
         if not 0.0 < self.tolerance < 1.0:
             raise ValueError(f"tolerance must be in (0, 1), not {self.tolerance}")
         return self
+
+    @property
+    def solver(self) -> str:
+        """The method with aliases resolved."""
+        return METHOD_ALIASES.get(self.method, self.method)
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}

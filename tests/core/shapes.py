@@ -76,3 +76,24 @@ def scene(parts, lamps: Lamps | None = None) -> SceneData:
                      albedo=np.concatenate(alb), emission=np.concatenate(emi),
                      lamps=lamps if lamps is not None else Lamps.empty(),
                      object_names=[f"part{k}" for k in range(len(parts))])
+
+
+def disk(radius: float, rings: int, segments: int, z: float = 0.0, flip: bool = False):
+    """A flat disk of concentric rings at height z, normal +Z (−Z if flip); a centre vertex plus
+    ``rings`` rings of ``segments`` vertices."""
+    r = np.repeat(np.arange(1, rings + 1) / rings * radius, segments)
+    a = np.tile(np.arange(segments) * 2 * np.pi / segments, rings)
+    pos = np.concatenate([[[0, 0, z]], np.stack([r * np.cos(a), r * np.sin(a), np.full(r.size, z)], 1)])
+    ring = lambda k: 1 + k * segments + np.arange(segments)  # noqa: E731
+    nxt = lambda idx, k: 1 + k * segments + (idx - 1 - k * segments + 1) % segments  # noqa: E731
+    tris = [np.stack([np.zeros(segments, int), ring(0), nxt(ring(0), 0)], 1)]
+    for k in range(rings - 1):
+        a0, a1 = ring(k), nxt(ring(k), k)
+        b0, b1 = ring(k + 1), nxt(ring(k + 1), k + 1)
+        tris += [np.stack([a0, b0, b1], 1), np.stack([a0, b1, a1], 1)]
+    tris = np.concatenate(tris).astype(np.int32)
+    nrm = np.tile(np.array([0, 0, 1], np.float32), (len(pos), 1))
+    if flip:
+        tris = tris[:, ::-1].copy()
+        nrm = -nrm
+    return pos.astype(np.float32), nrm, tris

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake
+from radiosity_baker.core import Settings, bake, elements
 from radiosity_baker.core.scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SHAPE_ELLIPSE
 
 F_UNIT_SQUARE_H1 = 0.23946  # point under a unit square at height 1
@@ -18,10 +18,15 @@ def bake_direct(parts, lamps=None, samples=16):
     return bake(shapes.scene(parts, lamps), Settings(method="direct", light_samples=samples)).lighting
 
 
+def receivers(p, n, t):
+    """Where the receivers of a single-part scene sit (vertices nudged into their fan)."""
+    return elements.build(shapes.scene([(p, n, t, (0.5,) * 3, (0,) * 3)])).position.astype(np.float64)
+
+
 def test_point_lamp_follows_inverse_square_and_cosine():
     p, n, t = shapes.grid(4.0, 8)
     lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], shapes.lamp(LAMP_POINT, (0.3, 0, 2), power=(100, 50, 10)))
-    v = np.array([0.3, 0, 2]) - p
+    v = np.array([0.3, 0, 2]) - receivers(p, n, t)
     d2 = (v ** 2).sum(1)
     expect = np.outer(v[:, 2] / np.sqrt(d2) / (4 * np.pi ** 2 * d2), [100, 50, 10])
     np.testing.assert_allclose(lit, expect, rtol=1e-4)
@@ -32,8 +37,9 @@ def test_spot_lamp_is_a_point_lamp_inside_its_cone_and_dark_outside():
     cone = np.radians(60.0)
     lamp = shapes.lamp(LAMP_SPOT, (0, 0, 1), direction=(0, 0, -1), power=(100,) * 3, spot_size=cone, spot_blend=0.0)
     lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)[:, 0]
-    angle = np.arctan2(np.linalg.norm(p[:, :2], axis=1), 1.0)
-    d2 = 1 + (p[:, :2] ** 2).sum(1)
+    q = receivers(p, n, t)
+    angle = np.arctan2(np.linalg.norm(q[:, :2], axis=1), 1.0)
+    d2 = 1 + (q[:, :2] ** 2).sum(1)
     point = 100 / np.sqrt(d2) / (4 * np.pi ** 2 * d2)
     inside, outside = angle < cone / 2 - 0.01, angle > cone / 2 + 0.01
     assert inside.sum() > 4 and outside.sum() > 4
@@ -46,7 +52,7 @@ def test_spot_blend_softens_the_cone_edge_with_a_smoothstep():
     cone, blend = np.radians(90.0), 0.5
     lamp = shapes.lamp(LAMP_SPOT, (0, 0, 1), power=(100,) * 3, spot_size=cone, spot_blend=blend)
     lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)[:, 0]
-    d2 = 1 + (p[:, :2] ** 2).sum(1)
+    d2 = 1 + (receivers(p, n, t)[:, :2] ** 2).sum(1)
     cos_a = 1 / np.sqrt(d2)
     cos_half = np.cos(cone / 2)
     x = np.clip((cos_a - cos_half) / ((1 - cos_half) * blend), 0, 1)
