@@ -45,7 +45,8 @@ def _positive_int(text: str) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog=PROG, description="Bake global illumination into Blender meshes.")
+    parser = _Parser(prog=PROG, description="Bake global illumination into Blender meshes. "
+                                            "(`build-extension --help`: build the extension zips.)")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     bake = commands.add_parser("bake", help="bake FILE.blend (the file itself is left unchanged)")
     defaults = Settings()
@@ -96,7 +97,13 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
-    """Run the command line with ``argv`` (without the program name); returns the exit status."""
+    """Run the command line with ``argv`` (without the program name); returns the exit status.
+
+    ``build-extension …`` is handed to ``addon.build`` (the extension zips).
+    """
+    if argv[:1] == ["build-extension"]:
+        from . import build
+        return build.main(argv[1:])
     try:
         args = _parser().parse_args(argv)
     except UsageError as exc:

@@ -120,6 +120,11 @@ def test_bad_arguments_are_one_line_errors(argv, capsys):
     one_error_line(capsys)
 
 
+def test_build_extension_subcommand_reaches_the_builder(capsys):
+    assert cli.main(["build-extension", "--help"]) == 0
+    assert "--fetch-wheels" in capsys.readouterr().out
+
+
 def test_python_dash_m_runs_the_same_command(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "BLENDER_USER_RESOURCES"}
     proc = subprocess.run([sys.executable, "-m", "radiosity_baker", "bake",
