@@ -103,7 +103,10 @@ def main(argv: list[str]) -> int:
     """
     if argv[:1] == ["build-extension"]:
         from . import build
-        return build.main(argv[1:])
+        try:
+            return build.main(argv[1:])
+        except SystemExit as exc:  # its argparse: --help or bad arguments; keep Blender open
+            return exc.code if isinstance(exc.code, int) else 2
     try:
         args = _parser().parse_args(argv)
     except UsageError as exc:
