@@ -87,6 +87,33 @@ def _parser() -> argparse.ArgumentParser:
     bake.add_argument("--bake-copy", action="store_true",
                       help="bake objects whose modifiers change their topology into a new "
                            "object <name>_baked instead of skipping them")
+    lightmap = bake.add_argument_group("lightmaps (--target lightmap or both)")
+    lightmap.add_argument("--texel-density", metavar="X", type=float, default=defaults.texel_density,
+                          help="texels per metre of surface (default: %(default)s)")
+    lightmap.add_argument("--max-size", metavar="N", type=_positive_int, default=defaults.max_size,
+                          help="largest lightmap side in texels (default: %(default)s)")
+    lightmap.add_argument("--padding", metavar="N", type=_positive_int, default=defaults.padding,
+                          help="texels between charts (default: %(default)s)")
+    lightmap.add_argument("--layout", choices=core_settings.LAYOUTS, default=defaults.layout,
+                          help="one atlas for all objects or one lightmap each "
+                               "(default: %(default)s)")
+    lightmap.add_argument("--output", metavar="DIR", default=defaults.output,
+                          help="folder for the EXR lightmaps and PNG previews; '//' is the "
+                               ".blend's folder (default: %(default)s)")
+    lightmap.add_argument("--hookup", nargs="?", const="node", default=defaults.hookup,
+                          choices=core_settings.HOOKUPS,
+                          help="add a UV Map + Image Texture node pair to each material "
+                               "('--hookup multiply' also multiplies it into the Base Color)")
+    lightmap.add_argument("--reunwrap", action="store_true",
+                          help="make new Lightmap UVs even where a mesh has them")
+    lightmap.add_argument("--supersample", metavar="N", type=_positive_int,
+                          default=defaults.supersample,
+                          help="lighting samples per texel along each axis (default: %(default)s)")
+    lightmap.add_argument("--lightmap-format", choices=core_settings.LIGHTMAP_FORMATS,
+                          default=defaults.lightmap_format,
+                          help="EXR channel precision (default: %(default)s)")
+    lightmap.add_argument("--pack-images", action="store_true",
+                          help="pack the lightmap images into the saved .blend")
     bake.add_argument("--save", metavar="OUT.blend", type=Path,
                       help="save the baked scene here (nothing is saved without it)")
     bake.add_argument("--report", metavar="REPORT.json", type=Path,

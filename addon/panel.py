@@ -35,6 +35,11 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         sub.prop(s, "visibility_rays")
         sub.prop(s, "bounces")
         layout.prop(s, "bake_copy")
+        col = layout.column(heading="Lightmap")
+        col.active = s.target != "vertex_colors"
+        for name in ("texel_density", "max_size", "padding", "layout", "output", "hookup",
+                     "reunwrap", "supersample", "lightmap_format", "pack_images"):
+            col.prop(s, name)
         row = layout.row()
         row.scale_y = 1.5
         row.operator(OBJECT_OT_radiosity_bake.bl_idname, text="Bake", icon='RENDER_STILL')

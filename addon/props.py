@@ -21,6 +21,15 @@ _ITEM_DESCRIPTIONS = {
     "combined": "Emission + surface colour × lighting: what the surface looks like",
     "indirect": "Only the light that bounced off other surfaces",
     "vertex_colors": "A FLOAT_COLOR point attribute on each mesh",
+    "lightmap": "OpenEXR lightmaps on a 'Lightmap' UV map, loaded as images",
+    "both": "A color attribute and lightmaps",
+    "atlas": "One lightmap shared by all baked objects",
+    "per_object": "One lightmap per object",
+    "none": "Leave materials alone",
+    "node": "Add a UV Map + Image Texture node pair showing the lightmap to each material",
+    "multiply": "Add the node pair and multiply the lightmap into the Base Color",
+    "half": "16-bit float channels (smaller files)",
+    "float": "32-bit float channels",
     "auto": "The GPU when Warp finds a usable one, else the CPU",
     "cpu": "The CPU, all cores",
     "cuda": "An NVIDIA GPU through CUDA",
@@ -73,6 +82,30 @@ class RadiosityBakeSettings(bpy.types.PropertyGroup):
     bake_copy: BoolProperty(name="Bake Copy", default=_DEFAULTS.bake_copy,
                             description="When modifiers change an object's vertex count, bake into "
                                         "a new object '<name>_baked' instead of skipping it")
+    texel_density: FloatProperty(name="Texel Density", default=_DEFAULTS.texel_density, min=1e-3,
+                                 soft_max=1000.0, description="Lightmap texels per metre of surface")
+    max_size: IntProperty(name="Max Size", default=_DEFAULTS.max_size, min=16, soft_max=8192,
+                          description="Largest lightmap side in texels; the density is lowered "
+                                      "until the atlas fits")
+    padding: IntProperty(name="Padding", default=_DEFAULTS.padding, min=1, soft_max=16,
+                         description="Texels between lightmap charts, filled by dilation")
+    layout: EnumProperty(name="Layout", items=_items(core_settings.LAYOUTS),
+                         default=_DEFAULTS.layout, description="How lightmaps are shared")
+    output: StringProperty(name="Output", default=_DEFAULTS.output, subtype='DIR_PATH',
+                           description="Folder the EXR lightmaps and PNG previews are written to "
+                                       "('//' is the .blend's folder)")
+    hookup: EnumProperty(name="Hook Up", items=_items(core_settings.HOOKUPS),
+                         default=_DEFAULTS.hookup, description="Whether to show the lightmap "
+                                                               "in the objects' materials")
+    reunwrap: BoolProperty(name="Re-unwrap", default=_DEFAULTS.reunwrap,
+                           description="Make new 'Lightmap' UVs even where a mesh already has them")
+    supersample: IntProperty(name="Supersample", default=_DEFAULTS.supersample, min=1, max=8,
+                             description="Lighting samples per texel along each axis")
+    lightmap_format: EnumProperty(name="EXR Format", items=_items(core_settings.LIGHTMAP_FORMATS),
+                                  default=_DEFAULTS.lightmap_format,
+                                  description="Precision of the EXR channels")
+    pack_images: BoolProperty(name="Pack Images", default=_DEFAULTS.pack_images,
+                              description="Pack the lightmap images into the .blend file")
     last_bake: PointerProperty(type=RadiosityBakeStats)
 
     def to_settings(self) -> Settings:

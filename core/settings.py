@@ -7,7 +7,10 @@ METHODS = ("direct", "reference")
 # Older name of the reference solver, still accepted.
 METHOD_ALIASES = {"bruteforce": "reference"}
 CONTENTS = ("lighting", "combined", "indirect")
-TARGETS = ("vertex_colors",)
+TARGETS = ("vertex_colors", "lightmap", "both")
+LAYOUTS = ("atlas", "per_object")
+HOOKUPS = ("none", "node", "multiply")
+LIGHTMAP_FORMATS = ("half", "float")
 DEVICES = ("auto", "cpu", "cuda")
 
 
@@ -19,7 +22,8 @@ class Settings:
         radiosity with ray-cast visibility, O(n²), small scenes; ``bruteforce`` is the same).
     content: ``lighting`` (irradiance/π, Cycles DIFFUSE Direct+Indirect without Color),
         ``combined`` (emission + albedo × lighting) or ``indirect`` (lighting minus direct).
-    target: where results go (``vertex_colors``).
+    target: where results go: ``vertex_colors``, ``lightmap`` (EXR images on a ``Lightmap`` UV map)
+        or ``both``.
     attribute: name of the color attribute written (only that exact name is ever overwritten).
     device: ``auto`` (CUDA when usable, else CPU), ``cpu`` or ``cuda``.
     light_samples: stratified shadow samples per lamp / emissive triangle and receiver (soft shadows).
@@ -32,6 +36,17 @@ class Settings:
     seed: random seed of sample jitter (results are deterministic for a given seed).
     bake_copy: when an object's modifiers change its vertex count, bake into a new object
         ``<name>_baked`` holding the evaluated mesh instead of skipping the object with a message.
+    texel_density: lightmap texels per metre of surface (world space).
+    max_size: largest lightmap page side (texels); the density is lowered until the atlas fits.
+    padding: texels between charts (filled by dilation so bilinear filtering shows no seams).
+    layout: ``atlas`` (one lightmap shared by all baked objects) or ``per_object`` (one each).
+    output: folder the EXR lightmaps (and PNG previews) are written to; ``//`` = next to the .blend.
+    hookup: ``none``; ``node`` adds a UV Map + Image Texture node pair to each affected material;
+        ``multiply`` also multiplies the lightmap into the Base Color.
+    reunwrap: make new ``Lightmap`` UVs even where a mesh has them (else they are reused).
+    supersample: texel sub-samples per axis (1: texel centres only).
+    lightmap_format: EXR channel precision, ``half`` or ``float``.
+    pack_images: pack the lightmap images into the .blend.
     """
 
     method: str = "reference"
@@ -46,11 +61,22 @@ class Settings:
     max_pairs: int = 16_000_000
     seed: int = 1
     bake_copy: bool = False
+    texel_density: float = 20.0
+    max_size: int = 1024
+    padding: int = 4
+    layout: str = "atlas"
+    output: str = "//lightmaps"
+    hookup: str = "none"
+    reunwrap: bool = False
+    supersample: int = 1
+    lightmap_format: str = "half"
+    pack_images: bool = False
 
     def validate(self) -> "Settings":
         """Raise ValueError with a clear message for an out-of-range setting; return self."""
         for name, allowed in (("method", METHODS + tuple(METHOD_ALIASES)), ("content", CONTENTS), ("target", TARGETS),
-                              ("device", DEVICES)):
+                              ("device", DEVICES), ("layout", LAYOUTS), ("hookup", HOOKUPS),
+                              ("lightmap_format", LIGHTMAP_FORMATS)):
             value = getattr(self, name)
             if value not in allowed:
                 raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {value!r}")
@@ -59,6 +85,13 @@ class Settings:
         for name in ("light_samples", "visibility_rays", "bounces", "max_pairs"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, not {getattr(self, name)}")
+        for name, low in (("max_size", 16), ("padding", 1), ("supersample", 1)):
+            if getattr(self, name) < low:
+                raise ValueError(f"{name} must be at least {low}, not {getattr(self, name)}")
+        if not self.texel_density > 0.0:
+            raise ValueError(f"texel_density must be positive, not {self.texel_density}")
+        if self.target != "vertex_colors" and not self.output.strip():
+            raise ValueError("output folder must not be empty when baking lightmaps")
         if not 0.0 < self.tolerance < 1.0:
             raise ValueError(f"tolerance must be in (0, 1), not {self.tolerance}")
         return self
