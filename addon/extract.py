@@ -50,6 +50,8 @@ class TargetMesh:
     num_vertices: vertex count of the evaluated mesh.
     topology_changed: the evaluated vertex count differs from the original ``ob.data`` one
         (modifiers added or removed vertices), so results do not map onto the original mesh.
+    corner_triangles: int32[T,3], the face corners of each of the object's triangles, in the order
+        of its triangles in ``SceneData`` (which start at ``triangle_offset``).
     """
 
     object_name: str
@@ -58,6 +60,8 @@ class TargetMesh:
     corner_vert: np.ndarray
     num_vertices: int
     topology_changed: bool
+    corner_triangles: np.ndarray = None
+    triangle_offset: int = 0
 
 
 @dataclass
@@ -273,7 +277,8 @@ class _Geometry:
     """One evaluated mesh in its local space, read once and shared by all its instances.
 
     positions, normals: float32[S,3] shading vertices; triangles: int32[T,3]; albedo, emission:
-    float32[T,3]; corner_shading, corner_vert: int32[C]; num_vertices: mesh vertex count.
+    float32[T,3]; corner_shading, corner_vert: int32[C]; loops: int32[T,3] corners of each
+    triangle; num_vertices: mesh vertex count.
     """
 
     positions: np.ndarray
@@ -284,6 +289,7 @@ class _Geometry:
     corner_shading: np.ndarray
     corner_vert: np.ndarray
     num_vertices: int
+    loops: np.ndarray
 
 
 def _read_attribute(me, name, domain_size, width, dtype, fallback):
@@ -332,7 +338,8 @@ def _read_mesh(me, materials: list, palette: _Materials, object_name: str):
     albedo, emission = palette.paint(me, materials, loops, poly_material[tri_poly], object_name)
     return _Geometry(positions=positions[corner_vert[first]], normals=corner_normals[first],
                      triangles=corner_shading[loops], albedo=albedo, emission=emission,
-                     corner_shading=corner_shading, corner_vert=corner_vert, num_vertices=nv)
+                     corner_shading=corner_shading, corner_vert=corner_vert, num_vertices=nv,
+                     loops=loops)
 
 
 def _object_materials(ob, me) -> list:
@@ -447,6 +454,7 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
     no_faces: list[str] = []
     instancers: set = set()
     offset = 0
+    triangle_offset = 0
 
     for inst in depsgraph.object_instances:
         ob = inst.object
@@ -497,8 +505,10 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
                 object_name=name, mesh_name=original.data.name,
                 corner_shading=geom.corner_shading + np.int32(offset),
                 corner_vert=geom.corner_vert, num_vertices=geom.num_vertices,
-                topology_changed=geom.num_vertices != len(original.data.vertices)))
+                topology_changed=geom.num_vertices != len(original.data.vertices),
+                corner_triangles=geom.loops, triangle_offset=triangle_offset))
         offset += positions.shape[0]
+        triangle_offset += triangles.shape[0]
 
     # An object whose geometry nodes output only instances has no faces of its own: not news.
     warnings.extend(f"{n} has no faces: skipped" for n in dict.fromkeys(no_faces)
