@@ -5,7 +5,7 @@ import os
 
 import bpy
 
-from . import cli, operator, panel, props
+from . import cli, lightmap, operator, panel, props
 
 _cli_handle = None
 
@@ -24,7 +24,7 @@ def register() -> None:
     global _cli_handle
     _use_extension_warp_cache()
     props.register()
-    for cls in operator.classes + panel.classes:
+    for cls in operator.classes + lightmap.classes + panel.classes:
         bpy.utils.register_class(cls)
     try:
         _cli_handle = bpy.utils.register_cli_command("radiosity_baker", cli.main)
@@ -37,6 +37,6 @@ def unregister() -> None:
     if _cli_handle is not None:
         bpy.utils.unregister_cli_command(_cli_handle)
         _cli_handle = None
-    for cls in reversed(operator.classes + panel.classes):
+    for cls in reversed(operator.classes + lightmap.classes + panel.classes):
         bpy.utils.unregister_class(cls)
     props.unregister()

@@ -13,7 +13,7 @@ from typing import Callable, Iterable, Optional
 
 from .. import core
 from ..core import BakeCancelled, BakeError, Settings
-from . import extract, props, write
+from . import extract, lightmap, props, write
 
 # Errors caused by the scene or the settings: shown to the user as their message alone.
 USER_ERRORS = (extract.ExtractionError, BakeError, ValueError)
@@ -38,6 +38,8 @@ class BakeJob:
         self._thread: Optional[threading.Thread] = None
         self._t0 = 0.0
         self.extraction = None
+        self.lightmap_request = None
+        self.lightmap_files: dict = {}
         self.result = None
         self.error: Optional[BaseException] = None
         self.timings: dict[str, float] = {}
@@ -84,9 +86,15 @@ class BakeJob:
         if self.error is not None:
             raise self.error
         t0 = time.perf_counter()
-        self.warnings += write.write_color_attributes(self.extraction, self.result.output,
-                                                      self.settings.attribute, self.settings,
-                                                      context)
+        if self.lightmap_request is not None:  # files first: a disk error leaves Blender untouched
+            self.lightmap_files = lightmap.write_files(self.result.lightmap, self.settings)
+        if self.settings.target in ("vertex_colors", "both"):
+            self.warnings += write.write_color_attributes(self.extraction, self.result.output,
+                                                          self.settings.attribute, self.settings,
+                                                          context)
+        if self.lightmap_request is not None:
+            self.warnings += lightmap.write_blender(self.result.lightmap, self.lightmap_files,
+                                                    self.settings)
         self.timings["write"] = time.perf_counter() - t0
         self.seconds = time.perf_counter() - self._t0
         if hasattr(context.scene, "radiosity_baker"):  # the CLI may run without the add-on registered
@@ -105,6 +113,10 @@ class BakeJob:
             receivers = [context.scene.objects[n] for n in self.receivers]
         self.extraction = extract.extract_scene(context.evaluated_depsgraph_get(), receivers)
         self.warnings += self.extraction.warnings
+        if self.settings.target in ("lightmap", "both"):
+            lightmap.output_folder(self.settings)  # an unwritable folder fails before baking
+            self.lightmap_request, warnings = lightmap.request(self.extraction, self.settings)
+            self.warnings += warnings
         self.timings["extract"] = time.perf_counter() - self._t0
 
     # -- any thread ------------------------------------------------------------------------------
@@ -113,7 +125,7 @@ class BakeJob:
         """core.bake; any exception is kept for ``finish()`` to raise on the main thread."""
         try:
             self.result = core.bake(self.extraction.scene, self.settings, self._on_progress,
-                                    self._cancel)
+                                    self._cancel, lightmap=self.lightmap_request)
         except BaseException as exc:  # noqa: BLE001 - re-raised by finish()
             self.error = exc
             return

@@ -23,6 +23,7 @@ class BakeResult:
     direct, indirect: its two parts.
     output: the content the settings asked for (lighting, combined or indirect).
     timings: seconds per stage; counts: objects, triangles, elements, lamps, rays, pairs, iterations.
+    lightmap: the lightmap pages (``core.lightmap.LightmapResult``) when a lightmap was requested.
     """
 
     lighting: np.ndarray
@@ -34,6 +35,7 @@ class BakeResult:
     counts: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     peak_memory_bytes: int = 0
+    lightmap: object = None
 
 
 class _Stages:
@@ -63,12 +65,15 @@ class _Stages:
 
 
 def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = None,
-         cancel=None) -> BakeResult:
+         cancel=None, lightmap=None) -> BakeResult:
     """Bake ``scene`` with ``settings``.
 
     progress(stage, fraction) is called as stages advance; ``cancel`` is an object with ``is_set()``
     (e.g. threading.Event) checked between kernel launches: when set, BakeCancelled is raised.
     Raises BakeError (clear message) for input that cannot be baked.
+    lightmap: a ``core.lightmap.LightmapRequest``: its objects are also unwrapped, rasterised and
+    lit per texel (direct light with shadow rays per texel, indirect interpolated from the
+    solution) into ``BakeResult.lightmap``.
     """
     from . import device as device_mod
     from . import direct, elements
@@ -116,6 +121,14 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     else:
         indirect = np.zeros_like(lit_direct)
 
+    lightmap_result = None
+    if lightmap is not None:
+        from .lightmap import bake_lightmaps
+        lightmap_result = bake_lightmaps(lightmap, scene, geometry, {"indirect": indirect}, settings,
+                                         dev, stages)
+        warnings += lightmap_result.warnings
+        counts["texels"] = lightmap_result.texels
+
     lighting = lit_direct + indirect
     output = {"lighting": lighting,
               "combined": els.emission + els.albedo * lighting,
@@ -123,7 +136,7 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     return BakeResult(lighting=lighting.astype(np.float32), direct=lit_direct.astype(np.float32),
                       indirect=indirect.astype(np.float32), output=output.astype(np.float32),
                       device=dev.name, timings=stages.timings, counts=counts, warnings=warnings,
-                      peak_memory_bytes=_peak_rss_bytes())
+                      peak_memory_bytes=_peak_rss_bytes(), lightmap=lightmap_result)
 
 
 def _peak_rss_bytes() -> int:

@@ -1,0 +1,266 @@
+"""Lightmaps in Blender: reading ``Lightmap`` UV maps before a bake, and in the job's final step
+writing the EXR files, the UV maps, the images and (on request) the material nodes; the
+``object.radiosity_bake_clear`` operator removes exactly what a bake added.
+
+What a bake adds is tagged so that clearing never touches the user's data: UV maps it created carry
+the mesh custom property ``radiosity_baker_uv``, images it loaded ``radiosity_baker_lightmap``, and
+material nodes it added are named ``RB Lightmap…``.
+
+Shared data: a mesh used by several objects has one UV map (laid out once, for the first object);
+in the shared atlas only that object is lightmapped, the per-object layout gives each its own image.
+A material used by objects on different lightmap images can show only one: it shows the first one
+and a warning says so.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ..core.lightmap import LightmapRequest, LightmapTarget, files
+from .extract import ExtractionError
+
+UV_NAME = "Lightmap"
+MAX_UV_LAYERS = 8
+UV_TAG = "radiosity_baker_uv"
+IMAGE_TAG = "radiosity_baker_lightmap"
+NODE_PREFIX = "RB Lightmap"
+NODE_UV, NODE_IMAGE, NODE_MULTIPLY = (f"{NODE_PREFIX} UV", f"{NODE_PREFIX}", f"{NODE_PREFIX} Multiply")
+COLORSPACE = "Linear Rec.709"
+
+
+def python_executable() -> str:
+    """A Python interpreter for the xatlas worker: ``sys.executable`` when it is one (the bpy
+    module, Blender ≥ 2.91), else the interpreter bundled under Blender's ``sys.prefix``."""
+    if Path(sys.executable).name.lower().startswith("python"):
+        return sys.executable
+    for folder in (Path(sys.prefix) / "bin", Path(sys.prefix)):
+        for name in (f"python{sys.version_info.major}.{sys.version_info.minor}", "python3", "python",
+                     "python.exe"):
+            if (folder / name).is_file():
+                return str(folder / name)
+    raise ExtractionError(f"no Python interpreter found for the UV unwrapper (looked next to "
+                          f"{sys.executable} and in {sys.prefix})")
+
+
+def _cache_dir():
+    package = __package__.rpartition(".")[0]
+    if package.startswith("bl_ext."):
+        return Path(bpy.utils.extension_path_user(package, path="unwrap_cache", create=True))
+    return None  # core's default: a folder in the system temp dir
+
+
+def output_folder(settings) -> Path:
+    """The absolute lightmap folder of ``settings.output`` (``//`` = the .blend's folder).
+
+    Raises ExtractionError when it is relative to an unsaved file or cannot be created / written.
+    """
+    text = settings.output.strip()
+    if text.startswith("//") and not bpy.data.filepath:
+        raise ExtractionError(f"lightmap output {text!r} is relative to the .blend file, which is not "
+                              f"saved: save it or choose an absolute folder")
+    folder = Path(bpy.path.abspath(text)).resolve()
+    existing = folder
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise ExtractionError(f"cannot write lightmaps to {folder}: {existing} is not a writable folder")
+    return folder
+
+
+def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
+    """What to lightmap (main thread, before the bake), and warnings.
+
+    Objects whose modifiers change the topology are skipped with the message color attributes get;
+    a mesh without a ``Lightmap`` UV map that already holds 8 is an error naming it.
+    """
+    warnings, targets = [], []
+    for t in extraction.targets:
+        ob = bpy.data.objects.get(t.object_name)
+        me = ob.data
+        if t.topology_changed or len(me.loops) != t.corner_vert.shape[0]:
+            warnings.append(f"{ob.name}: its modifiers change the vertex count ({t.num_vertices} "
+                            f"evaluated vs {len(me.vertices)} original); apply the modifiers to "
+                            f"lightmap it")
+            continue
+        if me.library is not None:
+            warnings.append(f"{ob.name}: mesh {me.name} is linked from a library: not lightmapped")
+            continue
+        layer = me.uv_layers.get(UV_NAME)
+        if layer is None and len(me.uv_layers) >= MAX_UV_LAYERS:
+            raise ExtractionError(f"mesh {me.name} ({ob.name}) already has {MAX_UV_LAYERS} UV maps, "
+                                  f"Blender's limit: remove one or add a '{UV_NAME}' UV map to reuse")
+        corner_uv = None
+        if layer is not None and not settings.reunwrap:
+            corner_uv = np.empty(len(me.loops) * 2, np.float32)
+            layer.uv.foreach_get("vector", corner_uv)
+            corner_uv = corner_uv.reshape(-1, 2)
+        targets.append(LightmapTarget(
+            object_name=ob.name, mesh_name=me.name, corner_vert=t.corner_vert,
+            corner_shading=t.corner_shading, corner_triangles=t.corner_triangles,
+            triangle_offset=t.triangle_offset, corner_uv=corner_uv))
+    if not targets:
+        raise ExtractionError("no object can be lightmapped" + (f": {warnings[-1]}" if warnings else ""))
+    return LightmapRequest(targets, python=python_executable(), cache_dir=_cache_dir()), warnings
+
+
+def write_files(result, settings) -> dict[str, Path]:
+    """Write each page as ``<folder>/<page>.exr`` plus a ``.png`` preview; {page name: exr path}."""
+    folder = output_folder(settings)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    for page in result.pages:
+        stem = bpy.path.clean_name(page.name)
+        paths[page.name] = folder / f"{stem}.exr"
+        files.write_exr(paths[page.name], page.rgb, settings.lightmap_format)
+        files.write_preview(folder / f"{stem}.png", page.rgb)
+    return paths
+
+
+def write_blender(result, paths: dict, settings) -> list[str]:
+    """UV maps, images and (``settings.hookup``) material nodes for a finished bake; warnings."""
+    warnings = []
+    for mesh_name, uv in result.uv.items():
+        _write_uv(bpy.data.meshes[mesh_name], uv)
+    images = {page.name: _load_image(page.name, paths[page.name], settings.pack_images)
+              for page in result.pages}
+    if settings.hookup != "none":
+        shown: dict[str, str] = {}  # material name -> page it shows
+        for page in result.pages:
+            for name in page.objects:
+                for slot in bpy.data.objects[name].material_slots:
+                    mat = slot.material
+                    if mat is None or mat.library is not None or mat.node_tree is None:
+                        warnings.append(f"{name}: a material slot has no editable material: "
+                                        f"lightmap not hooked up there")
+                        continue
+                    if shown.setdefault(mat.name, page.name) != page.name:
+                        warnings.append(f"material {mat.name} is used by objects on lightmaps "
+                                        f"{shown[mat.name]} and {page.name}: it shows "
+                                        f"{shown[mat.name]}; give the objects their own materials")
+                        continue
+                    warnings += _hook_up(mat, images[page.name], settings.hookup == "multiply")
+    return warnings
+
+
+def _write_uv(me, uv: np.ndarray) -> None:
+    """Create (tagged) or overwrite the ``Lightmap`` UV map; the active and render UV maps stay."""
+    layers = me.uv_layers
+    active = layers.active.name if layers.active is not None else None
+    render = next((l.name for l in layers if l.active_render), None)
+    layer = layers.get(UV_NAME)
+    if layer is None:
+        layer = layers.new(name=UV_NAME, do_init=False)
+        me[UV_TAG] = True
+    layer.uv.foreach_set("vector", np.nan_to_num(uv).astype(np.float32).ravel())
+    if active is not None:
+        layers.active = layers[active]
+    if render is not None:
+        layers[render].active_render = True
+    me.update()
+
+
+def _load_image(name: str, path: Path, pack: bool):
+    """Our image ``name`` reloaded from ``path``, or a new one loaded from it (a user's image of
+    that name is left alone: Blender gives ours a numbered name)."""
+    image = next((im for im in bpy.data.images if im.get(IMAGE_TAG) == name), None)
+    if image is not None and Path(bpy.path.abspath(image.filepath)).resolve() == path:
+        if image.packed_file is not None:
+            image.unpack(method="REMOVE")
+        image.reload()
+    else:
+        image = bpy.data.images.load(str(path), check_existing=False)
+        image.name = name
+        image[IMAGE_TAG] = name
+    image.colorspace_settings.name = COLORSPACE
+    if pack:
+        image.pack()
+    return image
+
+
+def _hook_up(mat, image, multiply: bool) -> list[str]:
+    """Add (or update) the UV Map + Image Texture pair showing ``image``; with ``multiply`` also a
+    Mix (Multiply) node between the Principled BSDF's Base Color and what fed it."""
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    uv_node = nodes.get(NODE_UV) or nodes.new("ShaderNodeUVMap")
+    uv_node.name, uv_node.label, uv_node.uv_map = NODE_UV, "Lightmap UV", UV_NAME
+    tex = nodes.get(NODE_IMAGE) or nodes.new("ShaderNodeTexImage")
+    tex.name, tex.label, tex.image, tex.interpolation = NODE_IMAGE, "Lightmap", image, "Linear"
+    if not tex.inputs["Vector"].is_linked:
+        links.new(uv_node.outputs["UV"], tex.inputs["Vector"])
+    left = min((n.location.x for n in nodes if not n.name.startswith(NODE_PREFIX)), default=0.0)
+    tex.location = (left - 320.0, -400.0)
+    uv_node.location = (left - 520.0, -400.0)
+    if not multiply or nodes.get(NODE_MULTIPLY) is not None:
+        return []
+    bsdf = next((n for n in nodes if n.type == "BSDF_PRINCIPLED"), None)
+    if bsdf is None:
+        return [f"material {mat.name} has no Principled BSDF: lightmap added but not multiplied"]
+    base = bsdf.inputs["Base Color"]
+    mix = nodes.new("ShaderNodeMix")
+    mix.name, mix.label = NODE_MULTIPLY, "Lightmap Multiply"
+    mix.data_type, mix.blend_type = "RGBA", "MULTIPLY"
+    mix.inputs["Factor_Float"].default_value = 1.0
+    mix.location = (bsdf.location.x - 220.0, bsdf.location.y - 300.0)
+    mix.inputs["A_Color"].default_value = base.default_value
+    if base.is_linked:
+        links.new(base.links[0].from_socket, mix.inputs["A_Color"])
+    links.new(tex.outputs["Color"], mix.inputs["B_Color"])
+    links.new(mix.outputs["Result_Color"], base)
+    return []
+
+
+def clear(objects) -> int:
+    """Remove what bakes added to ``objects``: tagged UV maps, ``RB Lightmap…`` nodes (restoring the
+    Base Color link a multiply node took over) and tagged images no longer used. Returns how many
+    items were removed. The EXR files on disk stay."""
+    removed = 0
+    materials = {slot.material for ob in objects for slot in ob.material_slots
+                 if slot.material is not None and slot.material.node_tree is not None}
+    for mat in materials:
+        nodes, links = mat.node_tree.nodes, mat.node_tree.links
+        mix = nodes.get(NODE_MULTIPLY)
+        if mix is not None:
+            source = mix.inputs["A_Color"].links[0].from_socket if mix.inputs["A_Color"].is_linked else None
+            for link in list(mix.outputs["Result_Color"].links):
+                target = link.to_socket
+                links.remove(link)
+                if source is not None:
+                    links.new(source, target)
+        for node in [n for n in nodes if n.name.startswith(NODE_PREFIX)]:
+            nodes.remove(node)
+            removed += 1
+    for me in {ob.data for ob in objects if ob.type == "MESH"}:
+        if me.get(UV_TAG) and UV_NAME in me.uv_layers:
+            me.uv_layers.remove(me.uv_layers[UV_NAME])
+            del me[UV_TAG]
+            removed += 1
+    for image in [im for im in bpy.data.images if im.get(IMAGE_TAG) is not None and im.users == 0]:
+        bpy.data.images.remove(image)
+        removed += 1
+    return removed
+
+
+class OBJECT_OT_radiosity_bake_clear(bpy.types.Operator):
+    """Remove the lightmap UV maps, images and material nodes radiosity bakes added"""
+
+    bl_idname = "object.radiosity_bake_clear"
+    bl_label = "Clear Radiosity Lightmaps"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    use_selected: bpy.props.BoolProperty(
+        name="Selected Only", default=True,
+        description="Clear only the selected objects (all objects when none is selected)")
+
+    def execute(self, context):
+        objects = [ob for ob in context.selected_objects] if self.use_selected else []
+        objects = objects or list(context.scene.objects)
+        removed = clear(objects)
+        self.report({'INFO'}, f"Radiosity lightmaps: {removed} items removed")
+        return {'FINISHED'}
+
+
+classes = (OBJECT_OT_radiosity_bake_clear,)

@@ -1,0 +1,67 @@
+"""xatlas in its own process: ``python _xatlas_worker.py IN.npz OUT.npz``.
+
+xatlas holds the GIL for its whole run and can crash on bad input, so it never runs inside Blender's
+process. This script imports nothing of the package (nor bpy): only numpy and xatlas.
+
+IN holds ``atlases`` (count) and per atlas ``a`` / mesh ``m``: ``a{a}_m{m}_pos`` float32[N,3]
+(metres), ``a{a}_m{m}_idx`` uint32[M,3], ``a{a}_meshes``, ``a{a}_density`` (texels per metre),
+``a{a}_max_size``, ``a{a}_padding`` (texels). OUT holds per atlas ``a{a}_size`` (width, height),
+``a{a}_density`` (the density used: lowered until the atlas fits one page of max_size), and per
+mesh ``a{a}_m{m}_vmap`` uint32[K], ``a{a}_m{m}_idx`` uint32[M,3], ``a{a}_m{m}_uv`` float32[K,2]
+in [0,1] of the page.
+"""
+import sys
+
+import numpy as np
+import xatlas
+
+# Each retry lowers the density a little more than the overshoot, so few retries are needed.
+SHRINK_MARGIN = 0.98
+MAX_TRIES = 16
+
+
+def _generate(meshes, density: float, padding: int):
+    atlas = xatlas.Atlas()
+    for pos, idx in meshes:
+        atlas.add_mesh(pos, idx)
+    pack = xatlas.PackOptions()
+    pack.resolution = 0  # the smallest page at this density
+    pack.texels_per_unit = density
+    pack.padding = padding
+    pack.bilinear = True
+    atlas.generate(xatlas.ChartOptions(), pack)
+    return atlas
+
+
+def main(path_in: str, path_out: str) -> int:
+    data = np.load(path_in)
+    out = {}
+    for a in range(int(data["atlases"])):
+        meshes = [(np.ascontiguousarray(data[f"a{a}_m{m}_pos"], np.float32),
+                   np.ascontiguousarray(data[f"a{a}_m{m}_idx"], np.uint32))
+                  for m in range(int(data[f"a{a}_meshes"]))]
+        density = float(data[f"a{a}_density"])
+        max_size = int(data[f"a{a}_max_size"])
+        padding = int(data[f"a{a}_padding"])
+        for _ in range(MAX_TRIES):
+            atlas = _generate(meshes, density, padding)
+            side = max(atlas.width, atlas.height)
+            if atlas.atlas_count <= 1 and side <= max_size:
+                break
+            density *= SHRINK_MARGIN * max_size / max(side, max_size + 1) / max(1, atlas.atlas_count) ** 0.5
+        else:
+            print(f"xatlas: no single page of {max_size} texels found", file=sys.stderr)
+            return 3
+        out[f"a{a}_size"] = np.array([atlas.width, atlas.height], np.int64)
+        out[f"a{a}_density"] = np.array(density)
+        for m in range(len(meshes)):
+            vmap, idx, uv = atlas[m]
+            out[f"a{a}_m{m}_vmap"] = vmap
+            out[f"a{a}_m{m}_idx"] = idx
+            out[f"a{a}_m{m}_uv"] = uv
+    np.savez(path_out, **out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1], sys.argv[2]))

@@ -1,0 +1,70 @@
+"""Lightmap files through OpenImageIO: float OpenEXR (zip) and a tone-mapped PNG preview.
+
+Pages hold row 0 at the bottom (Blender's and UV v = 0's convention); image files store the top
+row first, so rows are flipped on the way out and back in.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import BakeError
+
+
+def _oiio():
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        raise BakeError("writing lightmaps needs the OpenImageIO Python module") from None
+    return oiio
+
+
+def write_exr(path: Path, rgb: np.ndarray, precision: str = "half") -> None:
+    """Write float32[H,W,3] linear RGB (row 0 bottom) as an RGBA OpenEXR with zip compression.
+
+    precision: ``half`` or ``float`` channels; alpha is 1. Raises BakeError naming the path when
+    it cannot be written.
+    """
+    oiio = _oiio()
+    h, w = rgb.shape[:2]
+    rgba = np.concatenate([rgb, np.ones((h, w, 1), np.float32)], axis=2)
+    spec = oiio.ImageSpec(w, h, 4, oiio.HALF if precision == "half" else oiio.FLOAT)
+    spec.attribute("compression", "zip")
+    _write(oiio, path, spec, np.ascontiguousarray(np.flipud(rgba), np.float32))
+
+
+def write_preview(path: Path, rgb: np.ndarray) -> None:
+    """A PNG of float32[H,W,3]: exposure scaled so the 99th percentile maps to 1, Reinhard-style
+    roll-off above, sRGB encoded, 8 bits."""
+    oiio = _oiio()
+    h, w = rgb.shape[:2]
+    lum = rgb.max(axis=2)
+    white = float(np.percentile(lum[lum > 0], 99)) if (lum > 0).any() else 1.0
+    x = np.clip(rgb / max(white, 1e-30), 0.0, None)
+    x = x * (1.0 + x / 4.0) / (1.0 + x)  # Reinhard with white point 2: 1 → 0.625, 2 → 1
+    x = np.clip(x / 0.625 * 0.8, 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    px = np.rint(np.flipud(srgb) * 255.0).astype(np.uint8)
+    _write(oiio, path, oiio.ImageSpec(w, h, 3, oiio.UINT8), np.ascontiguousarray(px))
+
+
+def _write(oiio, path: Path, spec, pixels: np.ndarray) -> None:
+    out = oiio.ImageOutput.create(str(path))
+    if out is None:
+        raise BakeError(f"cannot write {path}: {oiio.geterror() or 'unknown image format'}")
+    try:
+        if not out.open(str(path), spec) or not out.write_image(pixels):
+            raise BakeError(f"cannot write {path}: {out.geterror()}")
+    finally:
+        out.close()
+
+
+def read_exr(path: Path) -> np.ndarray:
+    """float32[H,W,C] of an image file, row 0 at the bottom (the inverse of :func:`write_exr`)."""
+    oiio = _oiio()
+    buf = oiio.ImageBuf(str(path))
+    px = buf.get_pixels(oiio.FLOAT)
+    if px is None or buf.has_error:
+        raise BakeError(f"cannot read {path}: {buf.geterror()}")
+    return np.flipud(np.asarray(px, np.float32)).copy()

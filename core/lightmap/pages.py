@@ -1,0 +1,370 @@
+"""Lightmap pages: which objects share a page, their UVs, per-texel lighting, dilation, seams.
+
+:func:`bake_lightmaps` is the lightmap part of ``core.pipeline.bake``: it runs as stages of that one
+orchestrator (unwrap, raster, texel direct light, …) after the per-vertex solution exists.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from ..errors import BakeError
+from . import raster, unwrap
+
+ATLAS_NAME = "Lightmap"
+
+
+@dataclass
+class LightmapTarget:
+    """One object to lightmap (the add-on's ``TargetMesh`` plus its existing UVs).
+
+    object_name, mesh_name: Blender names; objects sharing ``mesh_name`` share its UV map.
+    corner_vert: int32[C] mesh vertex of each face corner; corner_shading: int32[C] global
+    shading vertex (index into SceneData) of each corner; corner_triangles: int32[T,3] corners of
+    the object's triangles, which are SceneData triangles ``triangle_offset … + T``.
+    corner_uv: float32[C,2] the mesh's existing ``Lightmap`` UVs to reuse, None to unwrap.
+    """
+
+    object_name: str
+    mesh_name: str
+    corner_vert: np.ndarray
+    corner_shading: np.ndarray
+    corner_triangles: np.ndarray
+    triangle_offset: int
+    corner_uv: Optional[np.ndarray] = None
+
+
+@dataclass
+class LightmapRequest:
+    """What to lightmap. python: interpreter for the xatlas worker (default sys.executable);
+    cache_dir: unwrap cache (default ``unwrap.default_cache_dir()``)."""
+
+    targets: list
+    python: Optional[str] = None
+    cache_dir: Optional[Path] = None
+
+
+@dataclass
+class Page:
+    """One lightmap image: ``rgb`` float32[H,W,3] linear (row 0 = v 0, Blender's bottom row),
+    ``covered`` bool[H,W] texels on a chart (the rest is dilated padding or empty), the
+    ``objects`` whose ``Lightmap`` UVs point into it, and the texel ``density`` (texels/m)."""
+
+    name: str
+    objects: list
+    rgb: np.ndarray
+    covered: np.ndarray
+    density: float
+
+    @property
+    def size(self) -> tuple:
+        return int(self.rgb.shape[1]), int(self.rgb.shape[0])
+
+
+@dataclass
+class LightmapResult:
+    """pages; uv: {mesh name: float32[C,2]} layouts made by this bake (to write as ``Lightmap``);
+    seam_error: largest difference across smooth UV seams relative to the brightest texel of its
+    page (0 without seams); texels: covered texels; warnings."""
+
+    pages: list
+    uv: dict
+    seam_error: float = 0.0
+    texels: int = 0
+    warnings: list = field(default_factory=list)
+
+
+@dataclass
+class _Group:
+    """Meshes laid out together (one unwrap) and the pages made from that layout: one page for
+    all objects (``per_object`` False) or one per object."""
+
+    name: str
+    owners: list            # LightmapTarget per mesh (the first object using it)
+    objects: dict           # mesh name -> [LightmapTarget] using it
+    unwrap: bool
+    per_object: bool
+
+
+def _plan(targets: list, settings) -> tuple[list, list]:
+    """Groups of meshes to lay out together, and warnings.
+
+    atlas: meshes unwrapped now share one page; meshes with reused ``Lightmap`` UVs share one page
+    when every mesh reuses (a rebake), else each gets its own (their UVs were not laid out with the
+    new ones). A mesh shared by several objects has one UV map: in an atlas only its first object
+    is baked (the others would overlap it); per_object gives each object its own page.
+    """
+    warnings = []
+    owners: dict[str, LightmapTarget] = {}
+    users: dict[str, list] = {}
+    for t in targets:
+        owners.setdefault(t.mesh_name, t)
+        users.setdefault(t.mesh_name, []).append(t)
+    if settings.layout == "per_object":
+        return [_Group(f"{ATLAS_NAME}_{o.mesh_name}", [o], {o.mesh_name: users[o.mesh_name]},
+                       o.corner_uv is None or settings.reunwrap, True) for o in owners.values()], warnings
+    for mesh, objs in users.items():
+        if len(objs) > 1:
+            warnings.append(f"mesh {mesh} is shared by {', '.join(o.object_name for o in objs)}: in a "
+                            f"shared atlas only {objs[0].object_name} is lightmapped; use the "
+                            f"per-object layout or make them single-user")
+    fresh = [o for o in owners.values() if o.corner_uv is None or settings.reunwrap]
+    kept = [o for o in owners.values() if not (o.corner_uv is None or settings.reunwrap)]
+    groups = []
+    if fresh:
+        groups.append(_Group(ATLAS_NAME, fresh, {o.mesh_name: [o] for o in fresh}, True, False))
+    if kept and not fresh:
+        groups.append(_Group(ATLAS_NAME, kept, {o.mesh_name: [o] for o in kept}, False, False))
+    else:
+        groups += [_Group(f"{ATLAS_NAME}_{o.object_name}", [o], {o.mesh_name: [o]}, False, False)
+                   for o in kept]
+    return groups, warnings
+
+
+def _corner_positions(t: LightmapTarget, scene) -> np.ndarray:
+    return scene.positions[t.corner_shading]
+
+
+def _mesh_vertices(t: LightmapTarget, scene) -> np.ndarray:
+    """float32[N,3] world position of each mesh vertex (any of its corners)."""
+    n = int(t.corner_vert.max()) + 1 if t.corner_vert.size else 0
+    out = np.zeros((n, 3), np.float32)
+    out[t.corner_vert] = _corner_positions(t, scene)
+    return out
+
+
+def _corner_uv(t: LightmapTarget, tri_uv: np.ndarray) -> tuple[np.ndarray, int]:
+    """Per-corner UVs float32[C,2] from per-triangle-corner UVs, and how many triangles disagree
+    with them (a polygon cut by a chart seam: its corners can hold one UV each)."""
+    c = t.corner_vert.shape[0]
+    uv = np.zeros((c, 2), np.float32)
+    ok = np.isfinite(tri_uv).all(axis=(1, 2))
+    uv[t.corner_triangles[ok].ravel()] = tri_uv[ok].reshape(-1, 2)
+    conflicts = int((np.abs(uv[t.corner_triangles[ok]] - tri_uv[ok]) > 1e-6).any(axis=(1, 2)).sum())
+    return uv, conflicts
+
+
+def _page_side(owners: list, scene, uvs: dict, settings) -> tuple[tuple, float]:
+    """Size of a page for reused UVs at the requested density (capped by max_size), and the
+    density it gives."""
+    world, texture = 0.0, 0.0
+    for o in owners:
+        p = _corner_positions(o, scene)[o.corner_triangles].astype(np.float64)
+        q = uvs[o.mesh_name][o.corner_triangles].astype(np.float64)
+        world += 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+        e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
+        texture += 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    if texture <= 0.0:
+        raise BakeError(f"the Lightmap UVs of {owners[0].object_name} have no area")
+    side = settings.texel_density * np.sqrt(world / texture)
+    side = int(min(settings.max_size, max(16, 4 * np.ceil(side / 4))))
+    return (side, side), side / np.sqrt(world / texture)
+
+
+def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, settings, dev,
+                   stages, texel_extra=None) -> LightmapResult:
+    """Lay out, rasterise and light the lightmaps of ``request`` (stages of ``pipeline.bake``).
+
+    per_vertex: {"indirect": float32[V,3]} per-shading-vertex solution, interpolated over each
+    triangle; direct light is evaluated per texel with shadow rays. texel_extra(points, normals)
+    -> {content: float32[N,3]} supplies per-texel values of further contents (e.g. AO).
+    """
+    from .. import direct
+
+    if not request.targets:
+        raise BakeError("no object to lightmap")
+    groups, warnings = _plan(request.targets, settings)
+    uvs: dict[str, np.ndarray] = {}
+    made: dict[str, np.ndarray] = {}
+    for g in groups:
+        if not g.unwrap:
+            for o in g.owners:
+                uvs[o.mesh_name] = np.asarray(o.corner_uv, np.float32)
+
+    todo = [g for g in groups if g.unwrap]
+    sizes = {}
+    if todo:
+        atlases = stages.run("unwrap", unwrap.unwrap,
+                             [[unwrap.ChartMesh(o.object_name, _mesh_vertices(o, scene),
+                                                o.corner_vert[o.corner_triangles]) for o in g.owners]
+                              for g in todo],
+                             settings.texel_density, settings.max_size, settings.padding,
+                             request.python, request.cache_dir)
+        for g, atlas in zip(todo, atlases):
+            sizes[g.name] = (atlas.size, atlas.density)
+            if atlas.density < settings.texel_density * 0.999:
+                warnings.append(f"lightmap {g.name}: {settings.texel_density:g} texels/m would not fit "
+                                f"{settings.max_size}² texels: {atlas.density:.3g} texels/m used")
+            for o, tri_uv in zip(g.owners, atlas.tri_uv):
+                uvs[o.mesh_name], conflicts = _corner_uv(o, tri_uv)
+                made[o.mesh_name] = uvs[o.mesh_name]
+                if conflicts:
+                    warnings.append(f"{o.object_name}: {conflicts} triangles of polygons cut by a lightmap "
+                                    f"chart seam are distorted; triangulate the mesh for exact charts")
+    for g in groups:
+        if g.name not in sizes:
+            sizes[g.name] = _page_side(g.owners, scene, uvs, settings)
+
+    # Pages: (name, objects, size, density, targets whose triangles it holds)
+    pages = []
+    for g in groups:
+        size, density = sizes[g.name]
+        if g.per_object:
+            pages += [(f"{ATLAS_NAME}_{t.object_name}", [t.object_name], size, density, [t])
+                      for t in g.objects[g.owners[0].mesh_name]]
+        else:
+            pages.append((g.name, [o.object_name for o in g.owners], size, density, g.owners))
+
+    s = settings.supersample
+
+    def rasterize_all():
+        out = []
+        for _, _, (w, h), _, members in pages:
+            tri_uv = np.concatenate([uvs[m.mesh_name][m.corner_triangles] for m in members])
+            tri_shading = np.concatenate([m.corner_shading[m.corner_triangles] for m in members])
+            tri_scene = np.concatenate([m.triangle_offset + np.arange(m.corner_triangles.shape[0])
+                                        for m in members]).astype(np.int64)
+            texels = raster.rasterize(tri_uv, w * s, h * s, dev)
+            pos = scene.positions[tri_shading]
+            world = 0.5 * np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
+            q = tri_uv.astype(np.float64) * (w * s, h * s)
+            e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
+            uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+            metres = np.sqrt(world / np.where(uv_area > 0, uv_area, np.inf))
+            points, normals = raster.surface_points(texels, pos, scene.normals[tri_shading],
+                                                    np.nan_to_num(metres), geometry, dev)
+            out.append((texels, tri_shading, tri_scene, points, normals, tri_uv))
+        return out
+
+    rastered = stages.run("raster", rasterize_all)
+    points = np.concatenate([r[3] for r in rastered]) if rastered else np.zeros((0, 3), np.float32)
+    normals = np.concatenate([r[4] for r in rastered]) if rastered else np.zeros((0, 3), np.float32)
+
+    lit_direct, _ = stages.run("texel direct", direct.direct_lighting, geometry, scene, points,
+                               normals, settings, dev, lambda f: stages.report("texel direct", f))
+
+    def interpolate(values):
+        parts = [np.einsum("nk,nkc->nc", r[0].bary, values[r[1][r[0].triangle]]) for r in rastered]
+        return np.concatenate(parts).astype(np.float32) if parts else np.zeros((0, 3), np.float32)
+
+    indirect = interpolate(per_vertex["indirect"])
+    lighting = lit_direct + indirect
+    tri = np.concatenate([r[2][r[0].triangle] for r in rastered]) if rastered else np.zeros(0, np.int64)
+    contents = {"lighting": lighting, "indirect": indirect,
+                "combined": scene.emission[tri] + scene.albedo[tri] * lighting}
+    if texel_extra is not None:
+        contents.update(texel_extra(points, normals))
+    if settings.content not in contents:
+        raise BakeError(f"content {settings.content!r} cannot be baked into lightmaps yet; "
+                        f"use one of {', '.join(contents)}")
+    values = contents[settings.content]
+
+    result_pages = []
+    start = 0
+    seam_error = 0.0
+    for (name, objects, (w, h), density, members), r in zip(pages, rastered):
+        texels = r[0]
+        v = values[start:start + texels.count]
+        start += texels.count
+        rgb, covered = _resolve(texels, v, w, h, s)
+        rgb = dilate(rgb, covered, settings.padding)
+        result_pages.append(Page(name, objects, rgb, covered, density))
+        for m in members:
+            seam_error = max(seam_error, seam_difference(rgb, uvs[m.mesh_name], m))
+    return LightmapResult(pages=result_pages, uv=made, seam_error=seam_error,
+                          texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings)
+
+
+def _resolve(texels: raster.Texels, values: np.ndarray, w: int, h: int, s: int):
+    """Page float32[H,W,3] and coverage bool[H,W] from supersampled texel values (mean of each
+    texel's covered sub-samples)."""
+    acc = np.zeros((h * s * w * s, 3), np.float64)
+    cnt = np.zeros(h * s * w * s, np.float64)
+    acc[texels.index] = values
+    cnt[texels.index] = 1.0
+    acc = acc.reshape(h, s, w, s, 3).sum(axis=(1, 3))
+    cnt = cnt.reshape(h, s, w, s).sum(axis=(1, 3))
+    covered = cnt > 0
+    rgb = np.where(covered[..., None], acc / np.maximum(cnt, 1.0)[..., None], 0.0)
+    return rgb.astype(np.float32), covered
+
+
+def dilate(rgb: np.ndarray, covered: np.ndarray, rings: int) -> np.ndarray:
+    """Grow charts ``rings`` texels into the empty texels around them: each ring sets an empty texel
+    next to filled ones (8-neighbourhood) to their mean, so bilinear filtering at chart borders never
+    mixes in black. rgb: float32[H,W,C]; covered: bool[H,W]. Returns a new array."""
+    out = np.where(covered[..., None], rgb, 0.0).astype(np.float32)
+    filled = covered.copy()
+    h, w = filled.shape
+    for _ in range(rings):
+        pv = np.pad(out * filled[..., None], ((1, 1), (1, 1), (0, 0)))
+        pw = np.pad(filled.astype(np.float32), 1)
+        total = np.zeros_like(out)
+        count = np.zeros((h, w), np.float32)
+        for dy in (0, 1, 2):
+            for dx in (0, 1, 2):
+                if dy == 1 and dx == 1:
+                    continue
+                total += pv[dy:dy + h, dx:dx + w]
+                count += pw[dy:dy + h, dx:dx + w]
+        grow = ~filled & (count > 0)
+        if not grow.any():
+            break
+        out[grow] = total[grow] / count[grow][:, None]
+        filled |= grow
+    return out
+
+
+def bilinear(rgb: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup (as a GPU samples with texel centres at half-integers, clamped at the
+    border) of float32[H,W,C] at float[N,2] UVs in [0,1]; returns float32[N,C]."""
+    h, w = rgb.shape[:2]
+    x = np.clip(uv[:, 0] * w - 0.5, 0, w - 1)
+    y = np.clip(uv[:, 1] * h - 0.5, 0, h - 1)
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    return ((rgb[y0, x0] * (1 - fx) + rgb[y0, x1] * fx) * (1 - fy)
+            + (rgb[y1, x0] * (1 - fx) + rgb[y1, x1] * fx) * fy)
+
+
+# Points along each seam edge where both sides are compared (fractions of the edge).
+_SEAM_SAMPLES = np.linspace(0.1, 0.9, 5)
+
+
+def seam_difference(rgb: np.ndarray, corner_uv: np.ndarray, target: LightmapTarget) -> float:
+    """Largest difference across smooth UV seams of ``target`` in the page ``rgb``, relative to the
+    page's brightest texel.
+
+    A smooth seam edge joins two triangles through the same two shading vertices (same normals on
+    both sides) while their UVs differ; both sides are sampled bilinearly at matching points along
+    the edge. Edges across hard edges (different shading vertices) are not seams of the lighting.
+    """
+    tris = target.corner_triangles
+    shading = target.corner_shading[tris]                       # [T,3]
+    a_idx, b_idx = [0, 1, 2], [1, 2, 0]
+    sa, sb = shading[:, a_idx].ravel(), shading[:, b_idx].ravel()
+    ca, cb = tris[:, a_idx].ravel(), tris[:, b_idx].ravel()
+    lo, hi = np.minimum(sa, sb), np.maximum(sa, sb)
+    flip = sa > sb
+    first = np.where(flip, cb, ca)  # corner at the lower shading vertex
+    second = np.where(flip, ca, cb)
+    order = np.lexsort((hi, lo))
+    lo, hi, first, second = lo[order], hi[order], first[order], second[order]
+    pair = (lo[:-1] == lo[1:]) & (hi[:-1] == hi[1:])
+    i = np.flatnonzero(pair)
+    if i.size == 0:
+        return 0.0
+    u0a, u1a = corner_uv[first[i]], corner_uv[second[i]]
+    u0b, u1b = corner_uv[first[i + 1]], corner_uv[second[i + 1]]
+    seam = (np.abs(u0a - u0b).max(axis=1) > 1e-6) | (np.abs(u1a - u1b).max(axis=1) > 1e-6)
+    if not seam.any():
+        return 0.0
+    f = _SEAM_SAMPLES[None, :, None]
+    pa = (u0a[seam, None] * (1 - f) + u1a[seam, None] * f).reshape(-1, 2)
+    pb = (u0b[seam, None] * (1 - f) + u1b[seam, None] * f).reshape(-1, 2)
+    diff = np.abs(bilinear(rgb, pa) - bilinear(rgb, pb)).max()
+    return float(diff / max(float(rgb.max()), 1e-30))
