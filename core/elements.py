@@ -10,7 +10,8 @@ import numpy as np
 
 from .scene import SceneData
 
-# Fraction of the way from a vertex towards the centre of its triangle fan its receiver point moves.
+# Fraction of the way from a vertex towards the centre of its triangle fan (projected on its
+# tangent plane) its receiver point moves.
 NUDGE = 0.01
 
 
@@ -19,7 +20,7 @@ class Elements:
     """n disks.
 
     position, normal: float32[n,3] (m, unit); the position is the vertex moved 1 % towards the
-    centre of its triangle fan (see NUDGE). area: float32[n] (m²), a third of the adjacent
+    centre of its triangle fan, along its tangent plane (see NUDGE). area: float32[n] (m²), a third of the adjacent
     triangles' area. albedo, emission: float32[n,3], area-weighted means over adjacent triangles
     (emission in radiance units). fan_offsets: int32[n+1] and fan_triangles: int32[3T] list, per
     element, the triangles it is a corner of (CSR), for exact near-field form factors.
@@ -58,8 +59,11 @@ def build(scene: SceneData) -> Elements:
     # limit from the surface's interior (what Cycles' offset rays see).
     p = scene.positions.astype(np.float64)
     centroid = p[tris].mean(axis=1)
-    fan_centre = weighted(centroid)
-    position = np.where(area[:, None] > 0, p + NUDGE * (fan_centre - p), p)
+    toward = weighted(centroid) - p
+    # only along the tangent plane: on a curved surface the fan centre lies below the surface
+    nrm = scene.normals.astype(np.float64)
+    toward -= nrm * (toward * nrm).sum(axis=1, keepdims=True)
+    position = np.where(area[:, None] > 0, p + NUDGE * toward, p)
 
     order = np.argsort(corners, kind="stable")
     fan_triangles = (order // 3).astype(np.int32)

@@ -29,6 +29,12 @@ GREEN = (0.12, 0.45, 0.15)
 CORNELL_LIGHT_STRENGTH = 16.0
 # Target edge length of the grid cells (m): ≈ 2800 vertices in the whole box.
 CORNELL_CELL = 0.03
+# Lamp scene: floor cell (m) and subdivision cuts of the primitives.
+LAMP_FLOOR_CELL = 0.15
+SUBDIVIDE_CUTS = {"Cube": 5}
+# A pillar of gridded quads (a subdivided cylinder's n-gon caps bake badly in Cycles' vertex bake).
+PILLAR_TOP = np.array([(-0.3, -1.6, 1.2), (0.3, -1.6, 1.2), (0.3, -1.0, 1.2), (-0.3, -1.0, 1.2)])
+PILLAR_CELL = 0.1
 # How far the light quad hangs below the ceiling (m), so the two never overlap.
 CORNELL_LIGHT_DROP = 0.001
 
@@ -49,8 +55,8 @@ CORNELL_OBJECTS = {  # name: material
 }
 CORNELL_VERTEX_RANGE = (2000, 4000)
 LAMP_SCENE_LAMPS = {"Point": "POINT", "Spot": "SPOT", "Sun": "SUN", "Area": "AREA"}
-LAMP_SCENE_MESHES = ("Floor", "Cube", "Sphere", "Cylinder")
-LAMP_SCENE_VERTEX_RANGE = (1000, 2000)
+LAMP_SCENE_MESHES = ("Floor", "Cube", "Sphere", "Pillar")
+LAMP_SCENE_VERTEX_RANGE = (1500, 3000)
 
 
 def cornell_to_blender(points_mm) -> np.ndarray:
@@ -156,7 +162,9 @@ def empty_file() -> bpy.types.Scene:
 def make_cornell_box() -> None:
     scene = empty_file()
     white, red, green = principled("White", WHITE), principled("Red", RED), principled("Green", GREEN)
-    light = principled("Light", (0.78, 0.78, 0.78), emission=(1.0, 1.0, 1.0),
+    # A black emitter: it sits 1 mm below the ceiling, and a reflective one would trap light in the
+    # gap (both of its faces reflect in Cycles, only the front of an element reflects here).
+    light = principled("Light", (0.0, 0.0, 0.0), emission=(1.0, 1.0, 1.0),
                        strength=CORNELL_LIGHT_STRENGTH)
     inside = cornell_to_blender([(278, 274.4, 279.6)])[0]
     for name, quad, mat in (("Floor", _FLOOR, white), ("Ceiling", _CEILING, white),
@@ -181,23 +189,27 @@ def make_lamp_scene() -> None:
     grey, orange, blue = (principled("Grey", (0.6, 0.6, 0.6)), principled("Orange", (0.8, 0.35, 0.1)),
                           principled("Blue", (0.1, 0.25, 0.7)))
     floor = np.array([(-3.0, -3.0, 0.0), (3.0, -3.0, 0.0), (3.0, 3.0, 0.0), (-3.0, 3.0, 0.0)])
-    mesh_object("Floor", [floor], 0.25, grey)
+    mesh_object("Floor", [floor], LAMP_FLOOR_CELL, grey)
     for name, op, kwargs, location, mat in (
             ("Cube", bpy.ops.mesh.primitive_cube_add, {"size": 1.0}, (-1.0, 0.5, 0.5), orange),
             ("Sphere", bpy.ops.mesh.primitive_uv_sphere_add,
              {"radius": 0.6, "segments": 32, "ring_count": 16}, (1.0, 0.0, 0.6), blue),
-            ("Cylinder", bpy.ops.mesh.primitive_cylinder_add,
-             {"radius": 0.35, "depth": 1.2, "vertices": 32}, (0.0, -1.3, 0.6), grey)):
+            ):
         op(location=location, **kwargs)
         ob = bpy.context.object
         ob.name = ob.data.name = name
         ob.data.materials.append(mat)
-        if name == "Cube":
+        if name in SUBDIVIDE_CUTS:
+            # per-vertex bakes need vertices where light changes: a cylinder's sides are one
+            # quad tall otherwise
             bpy.ops.object.mode_set(mode="EDIT")
-            bpy.ops.mesh.subdivide(number_cuts=5)
+            bpy.ops.mesh.subdivide(number_cuts=SUBDIVIDE_CUTS[name])
             bpy.ops.object.mode_set(mode="OBJECT")
         if name == "Sphere":
             ob.data.shade_smooth()
+    centre = PILLAR_TOP.mean(axis=0) * np.array([1.0, 1.0, 0.5])
+    mesh_object("Pillar", [facing(q, 2 * q.mean(axis=0) - centre) for q in [PILLAR_TOP, *box_sides(PILLAR_TOP)]],
+                PILLAR_CELL, grey)
     for name, kind, location, rotation_deg, settings in (
             ("Point", "POINT", (2.0, 2.0, 2.5), (0, 0, 0), {"energy": 300.0, "shadow_soft_size": 0.1}),
             ("Spot", "SPOT", (-2.0, -1.5, 3.0), (35.0, 0.0, -50.0),

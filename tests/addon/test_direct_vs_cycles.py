@@ -15,7 +15,7 @@ import pytest
 from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
 from radiosity_baker.addon.extract import extract_scene
 from radiosity_baker.addon.write import write_color_attributes
-from radiosity_baker.core import Settings, bake
+from radiosity_baker.core import Settings, bake, metrics
 
 RESULTS = Path(__file__).resolve().parents[2] / "bench" / "results" / "direct_vs_cycles.json"
 TOLERANCE = 0.03        # relative RMSE, per lamp type
@@ -76,12 +76,6 @@ CASES = {
 }
 
 
-def _relative_rmse(ours: np.ndarray, reference: np.ndarray) -> float:
-    """sqrt(mean |a − b|²) / mean |b| over vertices (|·|: Euclidean norm of the RGB triple)."""
-    err = np.linalg.norm(ours - reference, axis=1)
-    return float(np.sqrt(np.mean(err ** 2)) / np.mean(np.linalg.norm(reference, axis=1)))
-
-
 def _our_direct(receiver_name: str) -> np.ndarray:
     """float32[V,3]: our direct lighting per original vertex of the receiver, via the color attribute."""
     receiver = bpy.data.objects[receiver_name]
@@ -136,7 +130,7 @@ def test_direct_light_matches_cycles(empty_scene, case):
     reference = cycles_bake_vertex_colors(["Receiver"], passes=("DIRECT",),
                                           samples=CYCLES_SAMPLES)["Receiver"]
     ours = _our_direct("Receiver")
-    rmse = _relative_rmse(ours, reference)
+    rmse = metrics.relative_rmse(ours, reference)
     ratio = float(ours.sum() / reference.sum())
     print(f"\n{case}: relative RMSE {rmse:.4f}, mean ours/Cycles {ratio:.4f}, "
           f"Cycles mean {reference.mean():.4f}")

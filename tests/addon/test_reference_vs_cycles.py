@@ -1,0 +1,54 @@
+"""The reference solver against Cycles on the sample scenes (DIFFUSE, Direct + Indirect, no Color).
+
+Tolerances (issue #3): relative RMSE of lighting ≤ 5 %, mean bias within ±2 %, over all vertices
+of the scene's receivers. The Cycles reference uses 2048 samples and 64 bounces; its own noise is
+part of the measured error. Figures are written to bench/results/reference_vs_cycles.json.
+"""
+import json
+from pathlib import Path
+
+import bpy
+import pytest
+
+from radiosity_baker.addon.compare import bake_vertex_values, stack
+from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
+from radiosity_baker.core import Settings, metrics
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "bench" / "results" / "reference_vs_cycles.json"
+CYCLES_SAMPLES = 2048
+MAX_RMSE, MAX_BIAS = 0.05, 0.02
+
+
+def receivers(scene):
+    """Visible meshes with a reflecting surface: Cycles' DIFFUSE lighting pass of a black
+    (albedo 0) emitter is 0 whatever reaches it, so emitters like the Cornell light are left out."""
+    out = []
+    for ob in scene.objects:
+        if ob.type != "MESH" or ob.hide_render:
+            continue
+        mat = ob.active_material
+        bsdf = mat.node_tree.nodes.get("Principled BSDF") if mat and mat.node_tree else None
+        if bsdf is not None and max(bsdf.inputs["Base Color"].default_value[:3]) == 0.0:
+            continue
+        out.append(ob.name)
+    return sorted(out)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("blend", ["cornell_box.blend", "lamp_scene.blend"])
+def test_reference_matches_cycles_on_sample_scene(blend):
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / blend))
+    names = receivers(bpy.context.scene)
+    reference = cycles_bake_vertex_colors(names, samples=CYCLES_SAMPLES)
+    ours, result, seconds = bake_vertex_values(names, Settings(method="reference"))
+    figures = metrics.summary(stack(ours, names), stack(reference, names))
+    figures.update({"cycles_samples": CYCLES_SAMPLES, "vertices": int(stack(ours, names).shape[0]),
+                    "elements": result.counts["elements"], "seconds": round(seconds, 2)})
+    print(f"\n{blend}: {figures}")
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    table = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
+    table[blend] = figures
+    RESULTS.write_text(json.dumps(table, indent=2, sort_keys=True) + "\n")
+    assert figures["relative_rmse"] <= MAX_RMSE
+    assert abs(figures["mean_bias"]) <= MAX_BIAS
