@@ -87,6 +87,9 @@ def _parser() -> argparse.ArgumentParser:
     bake.add_argument("--bake-copy", action="store_true",
                       help="bake objects whose modifiers change their topology into a new "
                            "object <name>_baked instead of skipping them")
+    bake.add_argument("--ao-distance", metavar="M", type=float, default=defaults.ao_distance,
+                      help="for --content ao: occluders farther than this (m) do not count; 0: the "
+                           "world's AO distance (default: %(default)s)")
     lightmap = bake.add_argument_group("lightmaps (--target lightmap or both)")
     lightmap.add_argument("--texel-density", metavar="X", type=float, default=defaults.texel_density,
                           help="texels per metre of surface (default: %(default)s)")

@@ -534,8 +534,14 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
     tri_object = np.concatenate([np.full(p[2].shape[0], p[5], np.int32) for p in parts])
     scene = SceneData(positions=cat(0), normals=cat(1), triangles=cat(2).astype(np.int32),
                       tri_object=tri_object, albedo=cat(3), emission=cat(4),
-                      lamps=_lamps(lamp_items), object_names=names)
+                      lamps=_lamps(lamp_items), object_names=names, ao_distance=_ao_distance(depsgraph.scene))
     return Extraction(scene=scene, targets=targets, warnings=warnings)
+
+
+def _ao_distance(scene) -> float:
+    """The world's AO distance (m); Blender's default, 10 m, for a scene without a world."""
+    world = scene.world
+    return float(world.light_settings.distance) if world is not None else 10.0
 
 
 def _warn_viewport_modifiers(ob, warnings: list) -> None:

@@ -34,6 +34,9 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         sub.active = s.method != "direct"  # only the methods with indirect light use these
         sub.prop(s, "visibility_rays")
         sub.prop(s, "bounces")
+        row = layout.row()
+        row.active = s.content == "ao"
+        row.prop(s, "ao_distance")
         layout.prop(s, "bake_copy")
         col = layout.column(heading="Lightmap")
         col.active = s.target != "vertex_colors"

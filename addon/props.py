@@ -20,6 +20,8 @@ _ITEM_DESCRIPTIONS = {
     "lighting": "Light arriving at the surface (irradiance/π), without the surface colour",
     "combined": "Emission + surface colour × lighting: what the surface looks like",
     "indirect": "Only the light that bounced off other surfaces",
+    "ao": "Ambient occlusion: the unoccluded fraction of the sky within the AO distance, in all "
+          "three channels (what Cycles' AO bake gives)",
     "vertex_colors": "A FLOAT_COLOR point attribute on each mesh",
     "lightmap": "OpenEXR lightmaps on a 'Lightmap' UV map, loaded as images",
     "both": "A color attribute and lightmaps",
@@ -82,6 +84,9 @@ class RadiosityBakeSettings(bpy.types.PropertyGroup):
     bake_copy: BoolProperty(name="Bake Copy", default=_DEFAULTS.bake_copy,
                             description="When modifiers change an object's vertex count, bake into "
                                         "a new object '<name>_baked' instead of skipping it")
+    ao_distance: FloatProperty(name="AO Distance", default=_DEFAULTS.ao_distance, min=0.0,
+                               soft_max=100.0, unit='LENGTH', description="Occluders farther than "
+                               "this do not count for AO; 0 uses the world's AO distance")
     texel_density: FloatProperty(name="Texel Density", default=_DEFAULTS.texel_density, min=1e-3,
                                  soft_max=1000.0, description="Lightmap texels per metre of surface")
     max_size: IntProperty(name="Max Size", default=_DEFAULTS.max_size, min=16, soft_max=8192,

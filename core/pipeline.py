@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Optional
 
 import numpy as np
@@ -21,7 +21,8 @@ class BakeResult:
 
     lighting: irradiance/π at the shading normal (direct + indirect).
     direct, indirect: its two parts.
-    output: the content the settings asked for (lighting, combined or indirect).
+    output: the content the settings asked for (lighting, combined, indirect or ao: accessibility
+    in all three channels).
     timings: seconds per stage; counts: objects, triangles, elements, lamps, rays, pairs, iterations.
     lightmap: the lightmap pages (``core.lightmap.LightmapResult``) when a lightmap was requested.
     """
@@ -76,10 +77,12 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     solution) into ``BakeResult.lightmap``.
     """
     from . import device as device_mod
-    from . import direct, elements
-    from .solvers import reference
+    from . import direct, elements, hierarchy
+    from .solvers import ao, reference
 
     settings.validate()
+    if settings.ao_distance == 0.0:  # 0 stands for the scene world's AO distance
+        settings = replace(settings, ao_distance=float(scene.ao_distance))
     try:
         scene.validate()
     except ValueError as exc:
@@ -101,12 +104,19 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     def direct_progress(f):
         stages.report("direct", f)
 
-    lit_direct, direct_rays = stages.run(
-        "direct", direct.direct_lighting, geometry, scene, els.position, els.normal, settings,
-        dev, direct_progress)
+    if settings.content == "ao":  # AO needs no light
+        lit_direct, direct_rays = np.zeros((els.count, 3), np.float32), 0
+    else:
+        lit_direct, direct_rays = stages.run(
+            "direct", direct.direct_lighting, geometry, scene, els.position, els.normal, settings,
+            dev, direct_progress)
     counts = {"objects": len(scene.object_names), "triangles": scene.num_triangles,
               "vertices": scene.num_vertices, "elements": els.count, "lamps": len(scene.lamps),
               "emissive_triangles": int(geometry.num_emitters), "rays": int(direct_rays)}
+    hier = None
+    if settings.content == "ao":
+        hier = stages.run("hierarchy", hierarchy.build, els, dev, geometry)
+        counts["nodes"] = hier.count
 
     if settings.solver == "reference":
         def solve_progress(stage, f):
@@ -130,9 +140,14 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
         counts["texels"] = lightmap_result.texels
 
     lighting = lit_direct + indirect
-    output = {"lighting": lighting,
-              "combined": els.emission + els.albedo * lighting,
-              "indirect": indirect}[settings.content]
+    if settings.content == "ao":
+        access = stages.run("ao", ao.accessibility, hier, els, els.position, els.normal, settings, dev,
+                            lambda f: stages.report("ao", f))
+        output = np.repeat(access[:, None], 3, axis=1)
+    else:
+        output = {"lighting": lighting,
+                  "combined": els.emission + els.albedo * lighting,
+                  "indirect": indirect}[settings.content]
     return BakeResult(lighting=lighting.astype(np.float32), direct=lit_direct.astype(np.float32),
                       indirect=indirect.astype(np.float32), output=output.astype(np.float32),
                       device=dev.name, timings=stages.timings, counts=counts, warnings=warnings,

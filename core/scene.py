@@ -77,6 +77,8 @@ class SceneData:
         leaving both faces.
     lamps: the scene's lamps.
     object_names: names of the objects (or instances) the triangles came from.
+    ao_distance: the world's ambient occlusion distance (m, Blender's world.light_settings.distance):
+        occluders farther away do not count.
     """
 
     positions: np.ndarray
@@ -87,6 +89,7 @@ class SceneData:
     emission: np.ndarray
     lamps: Lamps
     object_names: list = field(default_factory=list)
+    ao_distance: float = 10.0
 
     @property
     def num_vertices(self) -> int:

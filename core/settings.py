@@ -6,7 +6,7 @@ from dataclasses import dataclass, fields
 METHODS = ("direct", "reference")
 # Older name of the reference solver, still accepted.
 METHOD_ALIASES = {"bruteforce": "reference"}
-CONTENTS = ("lighting", "combined", "indirect")
+CONTENTS = ("lighting", "combined", "indirect", "ao")
 TARGETS = ("vertex_colors", "lightmap", "both")
 LAYOUTS = ("atlas", "per_object")
 HOOKUPS = ("none", "node", "multiply")
@@ -21,7 +21,8 @@ class Settings:
     method: ``direct`` (lamps and emissive triangles only) or ``reference`` (all-pairs multi-bounce
         radiosity with ray-cast visibility, O(n²), small scenes; ``bruteforce`` is the same).
     content: ``lighting`` (irradiance/π, Cycles DIFFUSE Direct+Indirect without Color),
-        ``combined`` (emission + albedo × lighting) or ``indirect`` (lighting minus direct).
+        ``combined`` (emission + albedo × lighting), ``indirect`` (lighting minus direct) or ``ao``
+        (accessibility in [0,1] in all three channels, what Cycles' AO bake gives).
     target: where results go: ``vertex_colors``, ``lightmap`` (EXR images on a ``Lightmap`` UV map)
         or ``both``.
     attribute: name of the color attribute written (only that exact name is ever overwritten).
@@ -36,6 +37,8 @@ class Settings:
     seed: random seed of sample jitter (results are deterministic for a given seed).
     bake_copy: when an object's modifiers change its vertex count, bake into a new object
         ``<name>_baked`` holding the evaluated mesh instead of skipping the object with a message.
+    ao_distance: occluders farther than this (m) do not count for ``ao``; 0: the scene world's AO
+        distance (Blender's default is 10 m).
     texel_density: lightmap texels per metre of surface (world space).
     max_size: largest lightmap page side (texels); the density is lowered until the atlas fits.
     padding: texels between charts (filled by dilation so bilinear filtering shows no seams).
@@ -61,6 +64,7 @@ class Settings:
     max_pairs: int = 16_000_000
     seed: int = 1
     bake_copy: bool = False
+    ao_distance: float = 0.0
     texel_density: float = 20.0
     max_size: int = 1024
     padding: int = 4
@@ -92,6 +96,8 @@ class Settings:
             raise ValueError(f"texel_density must be positive, not {self.texel_density}")
         if self.target != "vertex_colors" and not self.output.strip():
             raise ValueError("output folder must not be empty when baking lightmaps")
+        if not self.ao_distance >= 0.0:
+            raise ValueError(f"ao_distance must be at least 0, not {self.ao_distance}")
         if not 0.0 < self.tolerance < 1.0:
             raise ValueError(f"tolerance must be in (0, 1), not {self.tolerance}")
         return self
