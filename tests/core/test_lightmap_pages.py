@@ -1,0 +1,167 @@
+"""Per-texel lighting against the per-vertex solution, coverage, dilation, seams, EXR, layouts."""
+import numpy as np
+import pytest
+
+import shapes
+from radiosity_baker.core import Settings, bake
+from radiosity_baker.core.lightmap import LightmapRequest, LightmapTarget, files
+from radiosity_baker.core.lightmap.pages import bilinear, dilate
+from radiosity_baker.core.scene import LAMP_POINT
+
+
+def _targets(sc, parts, names=None, mesh_names=None, corner_uv=None):
+    """A LightmapTarget per part of a shapes.scene (each triangle corner its own face corner)."""
+    out, t0 = [], 0
+    for k, part in enumerate(parts):
+        nt = part[2].shape[0]
+        shading = sc.triangles[t0:t0 + nt].ravel().astype(np.int32)
+        name = names[k] if names else f"part{k}"
+        out.append(LightmapTarget(name, mesh_names[k] if mesh_names else name,
+                                  corner_vert=(shading - shading.min()).astype(np.int32),
+                                  corner_shading=shading,
+                                  corner_triangles=np.arange(3 * nt, dtype=np.int32).reshape(nt, 3),
+                                  triangle_offset=t0,
+                                  corner_uv=None if corner_uv is None else corner_uv[k]))
+        t0 += nt
+    return out
+
+
+def _room():
+    """A 2 m floor and a 2 m wall at its −x edge facing +x, lit by a point lamp: direct light and
+    one bounce of indirect light on both."""
+    fp, fn, ft = shapes.grid(2.0, 8)
+    wp_, wn, wt = shapes.grid(2.0, 8)
+    rot = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], np.float32)  # +z → +x
+    wp_ = wp_ @ rot.T + np.array([-1.0, 0.0, 1.0], np.float32)
+    wn = wn @ rot.T
+    parts = [(fp, fn, ft, (0.8, 0.6, 0.4), (0, 0, 0)), (wp_, wn, wt, (0.5, 0.5, 0.5), (0, 0, 0))]
+    sc = shapes.scene(parts, shapes.lamp(LAMP_POINT, (0.3, 0.2, 1.2), power=(200.0,) * 3))
+    return sc, parts
+
+
+@pytest.fixture(scope="module")
+def room_bake(tmp_path_factory):
+    sc, parts = _room()
+    settings = Settings(method="reference", light_samples=1, visibility_rays=4, texel_density=24.0,
+                        padding=3, device="cpu")
+    request = LightmapRequest(_targets(sc, parts), cache_dir=tmp_path_factory.mktemp("cache"))
+    return sc, parts, bake(sc, settings, lightmap=request)
+
+
+def test_lightmap_matches_the_per_vertex_solution_at_the_vertices(room_bake):
+    sc, parts, r = room_bake
+    page, = r.lightmap.pages
+    assert page.objects == ["part0", "part1"] and r.counts["texels"] == page.covered.sum()
+    assert {"unwrap", "raster", "texel direct"} <= set(r.timings)
+    assert r.indirect.max() > 0.05 * r.lighting.max()  # the wall and floor light each other
+    for k, name in enumerate(page.objects):
+        target = _targets(sc, parts)[k]
+        at_vertices = bilinear(page.rgb, r.lightmap.uv[name])
+        expected = r.output[target.corner_shading]
+        error = np.abs(at_vertices - expected).max() / expected.max()
+        assert error < 0.01, (name, error)
+
+
+def test_every_covered_texel_is_finite_and_non_negative_and_padding_is_filled(room_bake):
+    _, _, r = room_bake
+    page, = r.lightmap.pages
+    assert np.isfinite(page.rgb).all() and (page.rgb >= 0).all()
+    lit = page.rgb.max(axis=2) > 0
+    assert page.covered.any() and (lit | ~page.covered).all()
+    # every texel within the padding (3) of a chart was dilated: 8-neighbours of covered texels
+    grown = np.zeros_like(page.covered)
+    h, w = grown.shape
+    ys, xs = np.nonzero(page.covered)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            grown[np.clip(ys + dy, 0, h - 1), np.clip(xs + dx, 0, w - 1)] = True
+    assert lit[grown].all()
+
+
+def test_combined_is_emission_plus_albedo_times_lighting_per_texel(tmp_path):
+    sc, parts = _room()
+    common = dict(method="direct", light_samples=1, texel_density=16.0, device="cpu")
+    pages = {}
+    for content in ("lighting", "combined"):
+        req = LightmapRequest(_targets(sc, parts)[:1], cache_dir=tmp_path)
+        pages[content] = bake(sc, Settings(content=content, **common), lightmap=req).lightmap.pages[0]
+    cov = pages["lighting"].covered
+    np.testing.assert_allclose(pages["combined"].rgb[cov], pages["lighting"].rgb[cov] * (0.8, 0.6, 0.4),
+                               rtol=1e-5, atol=1e-7)
+
+
+def test_dilation_grows_charts_ring_by_ring_with_the_mean_of_their_neighbours():
+    rgb = np.zeros((9, 9, 3), np.float32)
+    covered = np.zeros((9, 9), bool)
+    covered[4, 2:7] = True
+    rgb[4, 2:7] = np.arange(1, 6)[:, None]
+    out = dilate(rgb, covered, 2)
+    assert out[3, 4, 0] == pytest.approx(3.0)             # above the middle: mean of 2, 3, 4
+    assert out[4, 1, 0] == pytest.approx(1.0)             # left end
+    assert out[2, 4, 0] > 0 and out[1, 4, 0] == 0.0       # two rings, no more
+    np.testing.assert_array_equal(out[covered], rgb[covered])
+
+
+@pytest.mark.parametrize("precision, dtype", [("half", np.float16), ("float", np.float32)])
+def test_exr_round_trip_is_exact_at_the_stored_precision(tmp_path, precision, dtype):
+    rng = np.random.default_rng(3)
+    rgb = (rng.random((13, 17, 3)) * 20.0).astype(np.float32)
+    path = tmp_path / "page.exr"
+    files.write_exr(path, rgb, precision)
+    back = files.read_exr(path)
+    np.testing.assert_array_equal(back[..., :3], rgb.astype(dtype).astype(np.float32))
+    assert (back[..., 3] == 1.0).all()
+    files.write_preview(tmp_path / "page.png", rgb)
+    png = files.read_exr(tmp_path / "page.png")
+    assert png.shape == (13, 17, 3) and 0.0 <= png.min() and png.max() <= 1.0
+
+
+# Smooth UV seams on a lit sphere: both sides of a seam edge sampled bilinearly differ by less
+# than this fraction of the brightest texel (texel centres on the two sides sit up to ~0.7 texel
+# apart on the surface, so the lighting gradient sets the scale).
+SEAM_BOUND = 0.05
+
+
+def test_both_sides_of_smooth_uv_seams_agree(tmp_path):
+    p, n, t = shapes.icosphere(0.5, 3, inward=False)
+    parts = [(p, n, t, (0.5,) * 3, (0,) * 3)]
+    sc = shapes.scene(parts, shapes.lamp(LAMP_POINT, (0.0, 0.4, 1.5), power=(100.0,) * 3))
+    settings = Settings(method="direct", light_samples=1, texel_density=64.0, device="cpu")
+    r = bake(sc, settings, lightmap=LightmapRequest(_targets(sc, parts), cache_dir=tmp_path))
+    print(f"largest seam difference: {r.lightmap.seam_error:.4f} of the brightest texel")
+    assert 0.0 < r.lightmap.seam_error < SEAM_BOUND
+
+
+def test_layouts_shared_meshes_and_reused_uvs(tmp_path):
+    sc, parts = _room()
+    common = dict(method="direct", light_samples=1, texel_density=16.0, device="cpu")
+    # two objects sharing one mesh: in an atlas only the first, per object one page each
+    shared = _targets(sc, parts[:1], names=["A"]) + _targets(sc, parts[:1], names=["B"], mesh_names=["A"])
+    r = bake(sc, Settings(**common), lightmap=LightmapRequest(shared, cache_dir=tmp_path))
+    assert [p.objects for p in r.lightmap.pages] == [["A"]]
+    assert any("shared by A, B" in w for w in r.warnings)
+    r = bake(sc, Settings(layout="per_object", **common),
+             lightmap=LightmapRequest(shared, cache_dir=tmp_path))
+    assert [p.name for p in r.lightmap.pages] == ["Lightmap_A", "Lightmap_B"]
+    assert list(r.lightmap.uv) == ["A"]
+    np.testing.assert_array_equal(r.lightmap.pages[0].rgb, r.lightmap.pages[1].rgb)
+    # existing UVs are kept (nothing new to write) and sized by the density
+    uv = r.lightmap.uv["A"]
+    kept = _targets(sc, parts[:1], corner_uv=[uv])
+    r2 = bake(sc, Settings(**common), lightmap=LightmapRequest(kept, cache_dir=tmp_path))
+    assert r2.lightmap.uv == {} and r2.lightmap.pages[0].name == "Lightmap"
+    assert abs(r2.lightmap.pages[0].density - 16.0) / 16.0 < 0.15
+    r3 = bake(sc, Settings(reunwrap=True, **common), lightmap=LightmapRequest(kept, cache_dir=tmp_path))
+    assert list(r3.lightmap.uv) == ["part0"]
+
+
+def test_supersampling_keeps_the_page_and_the_values(tmp_path):
+    sc, parts = _room()
+    common = dict(method="direct", light_samples=1, texel_density=16.0, device="cpu")
+    pages = [bake(sc, Settings(supersample=s, **common),
+                  lightmap=LightmapRequest(_targets(sc, parts)[:1], cache_dir=tmp_path)).lightmap.pages[0]
+             for s in (1, 3)]
+    assert pages[0].size == pages[1].size
+    inner = pages[0].covered & pages[1].covered
+    diff = np.abs(pages[0].rgb[inner] - pages[1].rgb[inner]).max() / pages[0].rgb.max()
+    assert diff < 0.05
