@@ -134,8 +134,14 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     lightmap_result = None
     if lightmap is not None:
         from .lightmap import bake_lightmaps
+
+        def texel_ao(points, normals):
+            access = stages.run("texel ao", ao.accessibility, hier, els, points, normals, settings,
+                                dev, lambda f: stages.report("texel ao", f))
+            return {"ao": np.repeat(access[:, None], 3, axis=1)}
+
         lightmap_result = bake_lightmaps(lightmap, scene, geometry, {"indirect": indirect}, settings,
-                                         dev, stages)
+                                         dev, stages, texel_ao if settings.content == "ao" else None)
         warnings += lightmap_result.warnings
         counts["texels"] = lightmap_result.texels
 

@@ -243,8 +243,11 @@ def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, 
     points = np.concatenate([r[3] for r in rastered]) if rastered else np.zeros((0, 3), np.float32)
     normals = np.concatenate([r[4] for r in rastered]) if rastered else np.zeros((0, 3), np.float32)
 
-    lit_direct, _ = stages.run("texel direct", direct.direct_lighting, geometry, scene, points,
-                               normals, settings, dev, lambda f: stages.report("texel direct", f))
+    if settings.content == "ao":  # AO needs no light
+        lit_direct = np.zeros_like(points)
+    else:
+        lit_direct, _ = stages.run("texel direct", direct.direct_lighting, geometry, scene, points,
+                                   normals, settings, dev, lambda f: stages.report("texel direct", f))
 
     def interpolate(values):
         parts = [np.einsum("nk,nkc->nc", r[0].bary, values[r[1][r[0].triangle]]) for r in rastered]
