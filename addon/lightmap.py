@@ -175,6 +175,7 @@ def _load_image(name: str, path: Path, pack: bool):
         image = bpy.data.images.load(str(path), check_existing=False)
         image.name = name
         image[IMAGE_TAG] = name
+        image.use_fake_user = True  # kept in the saved file even before a material uses it
     image.colorspace_settings.name = COLORSPACE
     if pack:
         image.pack()
@@ -203,14 +204,19 @@ def _hook_up(mat, image, multiply: bool) -> list[str]:
     mix = nodes.new("ShaderNodeMix")
     mix.name, mix.label = NODE_MULTIPLY, "Lightmap Multiply"
     mix.data_type, mix.blend_type = "RGBA", "MULTIPLY"
-    mix.inputs["Factor_Float"].default_value = 1.0
+    _socket(mix.inputs, "Factor_Float").default_value = 1.0
     mix.location = (bsdf.location.x - 220.0, bsdf.location.y - 300.0)
-    mix.inputs["A_Color"].default_value = base.default_value
+    _socket(mix.inputs, "A_Color").default_value = base.default_value
     if base.is_linked:
-        links.new(base.links[0].from_socket, mix.inputs["A_Color"])
-    links.new(tex.outputs["Color"], mix.inputs["B_Color"])
-    links.new(mix.outputs["Result_Color"], base)
+        links.new(base.links[0].from_socket, _socket(mix.inputs, "A_Color"))
+    links.new(tex.outputs["Color"], _socket(mix.inputs, "B_Color"))
+    links.new(_socket(mix.outputs, "Result_Color"), base)
     return []
+
+
+def _socket(sockets, identifier: str):
+    """The socket with this identifier (a Mix node has several sockets of each name)."""
+    return next(s for s in sockets if s.identifier == identifier)
 
 
 def clear(objects) -> int:
@@ -224,8 +230,9 @@ def clear(objects) -> int:
         nodes, links = mat.node_tree.nodes, mat.node_tree.links
         mix = nodes.get(NODE_MULTIPLY)
         if mix is not None:
-            source = mix.inputs["A_Color"].links[0].from_socket if mix.inputs["A_Color"].is_linked else None
-            for link in list(mix.outputs["Result_Color"].links):
+            a = _socket(mix.inputs, "A_Color")
+            source = a.links[0].from_socket if a.is_linked else None
+            for link in list(_socket(mix.outputs, "Result_Color").links):
                 target = link.to_socket
                 links.remove(link)
                 if source is not None:
@@ -238,7 +245,8 @@ def clear(objects) -> int:
             me.uv_layers.remove(me.uv_layers[UV_NAME])
             del me[UV_TAG]
             removed += 1
-    for image in [im for im in bpy.data.images if im.get(IMAGE_TAG) is not None and im.users == 0]:
+    for image in [im for im in bpy.data.images
+                  if im.get(IMAGE_TAG) is not None and im.users == int(im.use_fake_user)]:
         bpy.data.images.remove(image)
         removed += 1
     return removed

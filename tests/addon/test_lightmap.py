@@ -1,0 +1,176 @@
+"""Lightmaps through the add-on: files, UV maps, images, hook-up, clearing, failures, the CLI."""
+import bpy
+import numpy as np
+import pytest
+
+from radiosity_baker.addon import cli
+from radiosity_baker.addon.job import BakeJob
+from radiosity_baker.addon.lightmap import IMAGE_TAG, NODE_PREFIX
+from radiosity_baker.core import BakeCancelled
+from radiosity_baker.core.lightmap import files
+from radiosity_baker.core.lightmap.pages import bilinear
+
+from scenes import GROUND, OCCLUDER, fast_settings, lit_ground, snapshot, vertex_colors
+
+
+@pytest.fixture
+def lit_scene(empty_scene, tmp_path):
+    lit_ground(empty_scene)
+    fast_settings(empty_scene, target="lightmap", output=str(tmp_path / "maps"), texel_density=8.0)
+    return empty_scene
+
+
+def _uv(mesh, name="Lightmap") -> np.ndarray:
+    out = np.empty(len(mesh.loops) * 2, np.float32)
+    mesh.uv_layers[name].uv.foreach_get("vector", out)
+    return out.reshape(-1, 2)
+
+
+def _pixels(image) -> np.ndarray:
+    w, h = image.size
+    px = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(px)
+    return px.reshape(h, w, 4)
+
+
+def test_bake_writes_exr_preview_lightmap_uvs_and_a_linear_image(lit_scene, tmp_path):
+    ground = bpy.data.objects[GROUND].data
+    user_uv = ground.uv_layers.new(name="UVMap")
+    user_uv.uv.foreach_set("vector", np.linspace(0, 1, len(ground.loops) * 2, dtype=np.float32))
+    before = _uv(ground, "UVMap")
+    lit_scene.radiosity_baker.target = "both"
+    assert bpy.ops.object.radiosity_bake(use_selected=False) == {'FINISHED'}
+
+    maps = tmp_path / "maps"
+    assert sorted(p.name for p in maps.iterdir()) == ["Lightmap.exr", "Lightmap.png"]
+    assert [l.name for l in ground.uv_layers] == ["UVMap", "Lightmap"]
+    assert ground.uv_layers.active.name == "UVMap" and ground.uv_layers["UVMap"].active_render
+    np.testing.assert_array_equal(_uv(ground, "UVMap"), before)
+    image = bpy.data.images["Lightmap"]
+    assert image.get(IMAGE_TAG) == "Lightmap" and image.colorspace_settings.name == "Linear Rec.709"
+    assert not image.packed_file
+    # Blender reads the EXR as written (rows flipped back: row 0 at the bottom)
+    exr = files.read_exr(maps / "Lightmap.exr")
+    np.testing.assert_allclose(_pixels(image), exr, rtol=1e-3, atol=1e-6)
+    # at the vertices the lightmap agrees with the color attribute baked alongside
+    at_corners = bilinear(exr[..., :3], _uv(ground))
+    corner_vert = np.empty(len(ground.loops), np.int32)
+    ground.loops.foreach_get("vertex_index", corner_vert)
+    per_vertex = vertex_colors(ground, "Lighting")[corner_vert, :3]
+    lit = per_vertex.max(axis=1) > 0.2 * per_vertex.max()  # away from the shadow's edges
+    error = np.abs(at_corners - per_vertex)[lit].max() / per_vertex.max()
+    assert error < 0.05
+
+
+def test_a_cancelled_bake_adds_no_uv_map_image_or_file(lit_scene, tmp_path):
+    before = snapshot()
+    uv_before = {m.name: [l.name for l in m.uv_layers] for m in bpy.data.meshes}
+    job = BakeJob(lit_scene.radiosity_baker.to_settings())
+    job.cancel()
+    with pytest.raises(BakeCancelled):
+        job.run_sync(bpy.context)
+    assert snapshot() == before and len(bpy.data.images) == 0
+    assert {m.name: [l.name for l in m.uv_layers] for m in bpy.data.meshes} == uv_before
+    assert not (tmp_path / "maps").exists()
+
+
+def test_a_mesh_with_eight_uv_maps_is_an_error_naming_it(lit_scene):
+    mesh = bpy.data.objects[GROUND].data
+    for i in range(8):
+        mesh.uv_layers.new(name=f"UV{i}")
+    with pytest.raises(RuntimeError, match=f"mesh {GROUND}.*8 UV maps"):
+        bpy.ops.object.radiosity_bake(use_selected=False)
+    assert len(bpy.data.images) == 0 and "Lightmap" not in bpy.data.objects[OCCLUDER].data.uv_layers
+
+
+def test_user_lightmap_uvs_are_reused_unchanged_unless_reunwrap(lit_scene):
+    mesh = bpy.data.objects[GROUND].data
+    layer = mesh.uv_layers.new(name="Lightmap")
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    corner_vert = np.empty(len(mesh.loops), np.int32)
+    mesh.loops.foreach_get("vertex_index", corner_vert)
+    planar = (co.reshape(-1, 3)[corner_vert, :2] / 6.0 + 0.5) * 0.9 + 0.05  # the user's own layout
+    layer.uv.foreach_set("vector", planar.astype(np.float32).ravel())
+    bpy.ops.object.radiosity_bake(use_selected=False)
+    np.testing.assert_array_equal(_uv(mesh), planar.astype(np.float32))
+    # the ground keeps its own page; the occluder, unwrapped now, gets the atlas
+    assert {im.name for im in bpy.data.images} == {"Lightmap", f"Lightmap_{GROUND}"}
+    lit_scene.radiosity_baker.reunwrap = True
+    bpy.ops.object.radiosity_bake(use_selected=False)
+    assert not np.array_equal(_uv(mesh), planar.astype(np.float32))
+
+
+def _material_with_linked_base_color():
+    mat = bpy.data.materials.new("Painted")
+    tree = mat.node_tree
+    rgb = tree.nodes.new("ShaderNodeRGB")
+    rgb.outputs[0].default_value = (0.2, 0.4, 0.6, 1.0)
+    tree.links.new(rgb.outputs[0], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    return mat
+
+
+def _links(mat):
+    return sorted((l.from_node.name, l.from_socket.identifier, l.to_node.name, l.to_socket.identifier)
+                  for l in mat.node_tree.links)
+
+
+def test_hookup_multiply_then_clear_restores_materials_uvs_and_images(lit_scene):
+    mat = _material_with_linked_base_color()
+    for name in (GROUND, OCCLUDER):  # one material shared by both objects
+        bpy.data.objects[name].data.materials.append(mat)
+    nodes_before, links_before = sorted(n.name for n in mat.node_tree.nodes), _links(mat)
+    lit_scene.radiosity_baker.hookup = "multiply"
+    bpy.ops.object.radiosity_bake(use_selected=False)
+    added = sorted(n.name for n in mat.node_tree.nodes if n.name.startswith(NODE_PREFIX))
+    assert added == ["RB Lightmap", "RB Lightmap Multiply", "RB Lightmap UV"]
+    base = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"]
+    assert base.links[0].from_node.name == "RB Lightmap Multiply"
+    assert mat.node_tree.nodes["RB Lightmap"].image == bpy.data.images["Lightmap"]
+    bpy.ops.object.radiosity_bake(use_selected=False)  # a rebake reuses the nodes and the image
+    assert len(mat.node_tree.nodes) == len(nodes_before) + 3 and len(bpy.data.images) == 1
+
+    assert bpy.ops.object.radiosity_bake_clear(use_selected=False) == {'FINISHED'}
+    assert sorted(n.name for n in mat.node_tree.nodes) == nodes_before
+    assert _links(mat) == links_before
+    assert len(bpy.data.images) == 0
+    assert all("Lightmap" not in m.uv_layers for m in bpy.data.meshes)
+
+
+def test_hookup_node_adds_the_pair_without_rewiring(lit_scene):
+    mat = _material_with_linked_base_color()
+    bpy.data.objects[GROUND].data.materials.append(mat)
+    links_before = _links(mat)
+    lit_scene.radiosity_baker.hookup = "node"
+    bpy.ops.object.radiosity_bake(use_selected=False)
+    assert _links(mat) == sorted(links_before + [("RB Lightmap UV", "UV", "RB Lightmap", "Vector")])
+
+
+def test_objects_whose_modifiers_change_topology_are_skipped_with_the_reason(lit_scene):
+    bpy.data.objects[OCCLUDER].modifiers.new("Sub", "SUBSURF")
+    job = BakeJob(lit_scene.radiosity_baker.to_settings())
+    warnings = job.run_sync(bpy.context)
+    assert any(OCCLUDER in w and "modifiers change the vertex count" in w for w in warnings)
+    assert "Lightmap" not in bpy.data.objects[OCCLUDER].data.uv_layers
+    assert bpy.data.images["Lightmap"].get(IMAGE_TAG) == "Lightmap"
+
+
+def test_relative_output_of_an_unsaved_file_is_a_clear_error(lit_scene):
+    lit_scene.radiosity_baker.output = "//maps"
+    with pytest.raises(RuntimeError, match="not saved"):
+        bpy.ops.object.radiosity_bake(use_selected=False)
+    assert len(bpy.data.images) == 0
+
+
+def test_cli_target_lightmap_writes_files_next_to_the_blend_and_packs(empty_scene, tmp_path):
+    lit_ground(empty_scene)
+    blend, out = tmp_path / "in.blend", tmp_path / "out.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli.main(["bake", str(blend), "--method", "direct", "--samples", "1", "--target",
+                     "lightmap", "--texel-density", "8", "--max-size", "64", "--padding", "2",
+                     "--pack-images", "--hookup", "--save", str(out)]) == 0
+    assert (tmp_path / "lightmaps" / "Lightmap.exr").is_file()
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    image = bpy.data.images["Lightmap"]
+    assert image.packed_file is not None and max(image.size) <= 64
+    assert "Lighting" not in bpy.data.objects[GROUND].data.attributes
