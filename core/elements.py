@@ -10,8 +10,8 @@ import numpy as np
 
 from .scene import SceneData
 
-# Fraction of the way from a vertex towards the centre of its triangle fan (projected on its
-# tangent plane) its receiver point moves.
+# Fraction of the way from a border vertex towards the centre of its triangle fan its receiver
+# point moves.
 NUDGE = 0.01
 
 
@@ -19,8 +19,8 @@ NUDGE = 0.01
 class Elements:
     """n disks.
 
-    position, normal: float32[n,3] (m, unit); the position is the vertex moved 1 % towards the
-    centre of its triangle fan, along its tangent plane (see NUDGE). area: float32[n] (m²), a third of the adjacent
+    position, normal: float32[n,3] (m, unit); a vertex on the border of its surface is moved 1 %
+    towards the centre of its triangle fan (see NUDGE). area: float32[n] (m²), a third of the adjacent
     triangles' area. albedo, emission: float32[n,3], area-weighted means over adjacent triangles
     (emission in radiance units). fan_offsets: int32[n+1] and fan_triangles: int32[3T] list, per
     element, the triangles it is a corner of (CSR), for exact near-field form factors.
@@ -54,16 +54,18 @@ def build(scene: SceneData) -> Elements:
         acc = np.stack([np.bincount(corners, weights=per_corner[:, c], minlength=n) for c in range(3)], axis=1)
         return acc / np.where(area > 0, area, 1.0)[:, None]
 
-    # Receivers sit a hair inside their own fan: a vertex on the edge where a wall meets the floor
-    # lies in the wall's plane and would see it edge-on (F = 0), while the lighting there is the
-    # limit from the surface's interior (what Cycles' offset rays see).
+    # Receivers on the border of their surface move a hair into their fan: a floor vertex on the
+    # edge where a wall stands lies in the wall's plane and would see it edge-on (F = 0), while
+    # the lighting there is the limit from the surface's interior (what Cycles' offset rays see).
+    # Interior vertices stay put, so closed and curved surfaces are untouched.
     p = scene.positions.astype(np.float64)
-    centroid = p[tris].mean(axis=1)
-    toward = weighted(centroid) - p
-    # only along the tangent plane: on a curved surface the fan centre lies below the surface
-    nrm = scene.normals.astype(np.float64)
-    toward -= nrm * (toward * nrm).sum(axis=1, keepdims=True)
-    position = np.where(area[:, None] > 0, p + NUDGE * toward, p)
+    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    uniq, uses = np.unique(edges, axis=0, return_counts=True)
+    border = np.zeros(n, bool)
+    border[uniq[uses == 1].ravel()] = True
+    border &= area > 0
+    position = p.copy()
+    position[border] += NUDGE * (weighted(p[tris].mean(axis=1))[border] - p[border])
 
     order = np.argsort(corners, kind="stable")
     fan_triangles = (order // 3).astype(np.int32)
