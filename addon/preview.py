@@ -18,7 +18,7 @@ def render_preview(scene, attribute_name: str, path, size: int = 512, samples: i
     Every surface shows its colour attribute ``attribute_name`` as emission of strength 1 (black
     where it is missing), through Cycles on the CPU with ``samples`` samples and no bounces, view
     transform Standard, so pixel values are the baked values (sRGB-encoded), scaled down by whole
-    exposure stops when needed so that at most 1 % of the vertices clip. Everything
+    exposure stops when needed so that at most 5 % of the vertices clip. Everything
     the render needs (material override, camera when the scene has none, render settings) is
     temporary: the scene is as before afterwards, whatever happens.
     """
@@ -59,7 +59,7 @@ def render_preview(scene, attribute_name: str, path, size: int = 512, samples: i
 
 
 def _exposure(scene, attribute_name: str) -> float:
-    """Exposure (stops, ≤ 0) that brings the 99th percentile of the attribute's values to ≤ 1."""
+    """Exposure (stops, ≤ 0) that brings the 95th percentile of the attribute's values to ≤ 1."""
     values = []
     for ob in scene.objects:
         attr = ob.data.attributes.get(attribute_name) if ob.type == 'MESH' else None
@@ -69,7 +69,7 @@ def _exposure(scene, attribute_name: str) -> float:
             values.append(rgba.reshape(-1, 4)[:, :3].max(axis=1))
     if not values:
         return 0.0
-    high = float(np.percentile(np.concatenate(values), 99))
+    high = float(np.percentile(np.concatenate(values), 95))
     return -float(math.ceil(math.log2(high))) if high > 1.0 else 0.0
 
 
