@@ -17,6 +17,8 @@ _ITEM_DESCRIPTIONS = {
     "direct": "Lamps and emissive surfaces only, with shadows (fast)",
     "reference": "Direct light plus multi-bounce indirect light, all element pairs with ray-cast "
                  "visibility (ground truth, small scenes)",
+    "bunnell": "Direct light plus one bounce of indirect light gathered over a disk hierarchy "
+               "(fast, large scenes, approximate)",
     "lighting": "Light arriving at the surface (irradiance/π), without the surface colour",
     "combined": "Emission + surface colour × lighting: what the surface looks like",
     "indirect": "Only the light that bounced off other surfaces",

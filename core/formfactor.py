@@ -89,6 +89,25 @@ def triangle_ff(p: wp.vec3, n: wp.vec3, v0: wp.vec3, v1: wp.vec3, v2: wp.vec3) -
 
 
 @wp.func
+def fan_ff(p: wp.vec3, n: wp.vec3, j: int, side: float, fan_offsets: wp.array(dtype=wp.int32),
+           fan_triangles: wp.array(dtype=wp.int32), tris: wp.array(dtype=wp.int32),
+           points: wp.array(dtype=wp.vec3)) -> float:
+    """Exact form factor from p to one side of element j's share (a third) of its triangles:
+    the front faces for side 1, the back faces for side −1 (elements.Elements' fan lists)."""
+    s = float(0.0)
+    for k in range(fan_offsets[j], fan_offsets[j + 1]):
+        t = fan_triangles[k]
+        a = points[tris[3 * t]]
+        b = points[tris[3 * t + 1]]
+        c = points[tris[3 * t + 2]]
+        nt = wp.cross(b - a, c - a)
+        h = side * wp.dot(p - a, nt)
+        if h > 1.0e-6 * wp.length(nt) * wp.length(p - a):
+            s += triangle_ff(p, n, a, b, c)
+    return s / 3.0
+
+
+@wp.func
 def ellipse_point(center: wp.vec3, u: wp.vec3, v: wp.vec3, hx: float, hy: float, ellipse: int,
                   k: int, count: int) -> wp.vec3:
     """Corner k of the lamp outline: a rectangle (4 corners) or an ellipse as a ``count``-gon."""

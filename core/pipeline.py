@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Callable, Optional
 
 import numpy as np
@@ -78,7 +79,7 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     """
     from . import device as device_mod
     from . import direct, elements, hierarchy
-    from .solvers import ao, reference
+    from .solvers import ao, bunnell, reference
 
     settings.validate()
     if settings.ao_distance == 0.0:  # 0 stands for the scene world's AO distance
@@ -114,16 +115,17 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
               "vertices": scene.num_vertices, "elements": els.count, "lamps": len(scene.lamps),
               "emissive_triangles": int(geometry.num_emitters), "rays": int(direct_rays)}
     hier = None
-    if settings.content == "ao":
+    if settings.content == "ao" or settings.solver == "bunnell":
         hier = stages.run("hierarchy", hierarchy.build, els, dev, geometry)
         counts["nodes"] = hier.count
 
-    if settings.solver == "reference":
+    solvers = {"reference": reference.solve, "bunnell": partial(bunnell.solve, hier=hier)}
+    if settings.content != "ao" and settings.solver in solvers:  # AO needs no light transport
         def solve_progress(stage, f):
             stages.report(stage, f)
 
-        solution = stages.run("solve", reference.solve, geometry, els, lit_direct, settings, dev,
-                              solve_progress)
+        solution = stages.run("solve", solvers[settings.solver], geometry, els, lit_direct, settings,
+                              dev, solve_progress)
         indirect = solution.indirect
         solver_counts = dict(solution.counts)
         counts["rays"] += int(solver_counts.pop("rays", 0))

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-METHODS = ("direct", "reference")
+METHODS = ("direct", "reference", "bunnell")
 # Older name of the reference solver, still accepted.
 METHOD_ALIASES = {"bruteforce": "reference"}
 CONTENTS = ("lighting", "combined", "indirect", "ao")
@@ -19,7 +19,9 @@ class Settings:
     """Bake settings.
 
     method: ``direct`` (lamps and emissive triangles only) or ``reference`` (all-pairs multi-bounce
-        radiosity with ray-cast visibility, O(n²), small scenes; ``bruteforce`` is the same).
+        radiosity with ray-cast visibility, O(n²), small scenes; ``bruteforce`` is the same) or
+        ``bunnell`` (one bounce of indirect light gathered over the disk hierarchy, O(n log n), no
+        rays; approximate, see README).
     content: ``lighting`` (irradiance/π, Cycles DIFFUSE Direct+Indirect without Color),
         ``combined`` (emission + albedo × lighting), ``indirect`` (lighting minus direct) or ``ao``
         (accessibility in [0,1] in all three channels, what Cycles' AO bake gives).

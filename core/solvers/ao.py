@@ -1,21 +1,28 @@
-"""Ambient occlusion (accessibility) and unshadowed-by-rays light gathering over the disk tree.
+"""Ambient occlusion (accessibility) and gathered light over the disk tree, O(n log n).
 
-Per receiver one stackless traversal of the hierarchy (``hierarchy.py``) sums the form factors of
-the front faces it sees (ALGORITHMS.md §1): a node far enough away (d² ≥ OPEN·r², r its bounding
-radius) counts as one disk and its subtree is skipped, a nearer one is opened; within ±10 % of the
-threshold both are blended so nothing steps where the level switches. Leaves nearer than
-NEAR·area use the exact form factor of the element's own triangles (``reference.fan_ff``); farther
-ones its disk. Senders beyond the AO distance count for nothing (as Cycles' AO).
+Per receiver one stackless traversal of the hierarchy (``hierarchy.py``) sums form factors
+(ALGORITHMS.md §1): a node far enough away (d² ≥ OPEN·r², r its bounding radius) counts as one
+disk and its subtree is skipped, a nearer one is opened; within ±10 % of the threshold both are
+blended so nothing steps where the level switches. Leaves nearer than NEAR·area use the exact
+form factor of the element's own triangles (``formfactor.fan_ff``), farther ones their disk.
+Senders beyond the AO distance count for nothing (as in Cycles' AO).
 
-Overlapping occluders (an occluder hidden behind another) must not add up. Bunnell's multi-pass
-fix (ALGORITHMS.md §2: weight each sender by its own accessibility from the previous pass) cannot
-get both cases of §8 right: inside a closed sphere every sender has accessibility 0, so pass 2
-says "fully open" (the passes alternate 0, 1, 0 …), while the farther of two stacked disks is
-half open itself yet wholly hidden from the receiver. So shadowing is resolved per direction
-instead: the receiver's hemisphere is cut into BINS cells of equal cosine-weighted measure (rings
-of equal sin²θ × sectors of equal azimuth); each far contribution is splatted bilinearly into the
-cells around its direction, and a cell can be covered at most once. Near-field (exact) parts are
-added whole. Accessibility = sat(1 − Σ_cells min(cover, cell measure) − near).
+Overlapping occluders must not add up. Bunnell's multi-pass fix (ALGORITHMS.md §2: weight each
+sender by its own accessibility from the previous pass) cannot get both cases of §8 right: inside
+a closed sphere every sender has accessibility 0, so pass 2 says "fully open" (the passes
+alternate 0, 1, 0 …), while the farther of two stacked disks is half open itself yet wholly
+hidden from the receiver. So overlaps are resolved per direction instead: the receiver's
+hemisphere is cut into BINS cells of equal cosine-weighted measure (rings of equal sin²θ ×
+sectors of equal azimuth); each contribution is splatted bilinearly into the cells around its
+direction, and a cell is covered at most once. Near-field (exact) parts count whole and take
+their cell first (a close, wide sender can exceed one cell); farther ones fill what is left.
+
+Front faces always count. Back faces block too (Cycles' AO rays stop at either side, so a
+receiver under a box resting on it, or behind a single-sided sheet, is dark), but a cell takes
+the larger of its front and back cover, not their sum: a closed object shows the same directions
+twice, its near side's front faces and its far side's back faces. A surface facing the receiver
+in the receiver's own plane (contact) is seen from a hair off the receiver, as Cycles' offset
+rays see it.
 """
 from __future__ import annotations
 
@@ -27,9 +34,8 @@ import warp as wp
 
 from .. import device as device_mod
 from ..elements import Elements
-from ..formfactor import disk_ff, tangent_frame
+from ..formfactor import disk_ff, fan_ff, tangent_frame
 from ..hierarchy import MAX_LEVELS, Hierarchy
-from .reference import fan_ff
 
 # Open a node when d² < OPEN·radius² (blended over ±10 %): the cluster disk then subtends less than
 # ~14°, where its form factor is within the 2 % the tests ask of the all-pairs sum.
@@ -37,6 +43,8 @@ OPEN = 16.0
 # A leaf nearer than d² < NEAR·area uses the exact form factor of its triangles (ALGORITHMS.md §1:
 # 4–8; the disk approximation is off by more than 5 % inside that).
 NEAR = 8.0
+# Offset towards an opposite-facing near sender, relative to its disk's √area (see the kernel).
+CONTACT = 1.0e-3
 RINGS = 4
 SECTORS = 8
 BINS = RINGS * SECTORS
@@ -112,12 +120,14 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     n = rn[i]
     tu, tv = tangent_frame(n)
     cover = _bins()
+    back = _bins()
     red = _bins()
     green = _bins()
     blue = _bins()
     weights = _levels()
     weights[level[root]] = 1.0
-    near = float(0.0)
+    near = _bins()  # near-field front faces, per cell
+    near_back = _bins()
     near_light = wp.vec3(0.0)
     raw = float(0.0)
     dirsum = wp.vec3(0.0)
@@ -133,8 +143,10 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
             node = next_node[node]
             continue
         w = weights[level[node]]
-        far = float(0.0)    # splatted into the cells
-        exact = float(0.0)  # added whole
+        far = float(0.0)    # front faces, splatted into the cells
+        far_b = float(0.0)  # back faces, splatted
+        exact = float(0.0)  # front faces, near field: never capped
+        exact_b = float(0.0)
         child = first_child[node]
         if child < 0:
             if dist < distance:
@@ -142,9 +154,18 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                 t = wp.clamp((d2 / (NEAR * a) - 0.9) * 5.0, 0.0, 1.0)
                 if t > 0.0:
                     far = w * t * disk_ff(p, n, q, n_nrm[node], a)
+                    far_b = w * t * disk_ff(p, n, q, -n_nrm[node], a)
                 if t < 1.0:
-                    exact = w * (1.0 - t) * fan_ff(p, n, element[node], fan_offsets, fan_triangles,
-                                                   tris, points)
+                    e = element[node]
+                    # A surface facing the receiver in its own plane is in contact with it (a box
+                    # resting on the floor): seen from a hair off the receiver, as Cycles' offset
+                    # rays see it, it covers the hemisphere instead of vanishing edge-on.
+                    pe = p
+                    if wp.dot(n_nrm[node], n) < 0.0:
+                        pe = p - n * (CONTACT * wp.sqrt(a))
+                    exact = w * (1.0 - t) * fan_ff(pe, n, e, 1.0, fan_offsets, fan_triangles, tris, points)
+                    exact_b = w * (1.0 - t) * fan_ff(p, n, e, -1.0, fan_offsets, fan_triangles, tris,
+                                                     points)
             node = next_node[node]
         else:
             alpha = float(0.0)
@@ -152,21 +173,33 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                 alpha = wp.clamp((d2 / (open_k * r * r) - 0.9) * 5.0, 0.0, 1.0)
             if alpha > 0.0:
                 far = w * alpha * cluster_ff(p, n, q, n_nrm[node], n_area[node], n_spread[node])
+                far_b = w * alpha * cluster_ff(p, n, q, -n_nrm[node], n_area[node], n_spread[node])
             if alpha < 1.0:
                 weights[level[child]] = w * (1.0 - alpha)
                 node = child
             else:
                 node = next_node[node]
-        if far > 0.0 or exact > 0.0:
+        if far + far_b + exact + exact_b > 0.0:
             dhat = v / dist
-            raw += far + exact
-            dirsum += dhat * (far + exact)
-            near += exact
+            raw += far + far_b + exact + exact_b
+            dirsum += dhat * (far + far_b + exact + exact_b)
             c0, c1, c2, c3, w0, w1, w2, w3 = cell_of(dhat, tu, tv, n)
             cover[c0] = cover[c0] + far * w0
             cover[c1] = cover[c1] + far * w1
             cover[c2] = cover[c2] + far * w2
             cover[c3] = cover[c3] + far * w3
+            back[c0] = back[c0] + far_b * w0
+            back[c1] = back[c1] + far_b * w1
+            back[c2] = back[c2] + far_b * w2
+            back[c3] = back[c3] + far_b * w3
+            near[c0] = near[c0] + exact * w0
+            near[c1] = near[c1] + exact * w1
+            near[c2] = near[c2] + exact * w2
+            near[c3] = near[c3] + exact * w3
+            near_back[c0] = near_back[c0] + exact_b * w0
+            near_back[c1] = near_back[c1] + exact_b * w1
+            near_back[c2] = near_back[c2] + exact_b * w2
+            near_back[c3] = near_back[c3] + exact_b * w3
             if with_light != 0:
                 L = radiance[sender]
                 near_light += L * exact
@@ -182,14 +215,17 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                 blue[c1] = blue[c1] + L[2] * far * w1
                 blue[c2] = blue[c2] + L[2] * far * w2
                 blue[c3] = blue[c3] + L[2] * far * w3
-    occ = near
+    occ = float(0.0)
     light = near_light
     for b in range(BINS):
+        # Near-field parts count whole (the exact form factor of a close, wide sender can exceed a
+        # cell); whatever lies farther in the same cell fills only what they leave free.
+        blocked = wp.max(near[b], near_back[b])
+        occ += wp.max(blocked, wp.min(wp.max(cover[b] + near[b], back[b] + near_back[b]), CELL))
         c = cover[b]
-        occ += wp.min(c, CELL)
         if with_light != 0 and c > 0.0:
-            # senders stacked in one cell share it: their mean radiance over the cell's measure
-            light += wp.vec3(red[b], green[b], blue[b]) * wp.min(1.0, CELL / c)
+            # senders stacked in one cell share what is left of it: their mean radiance
+            light += wp.vec3(red[b], green[b], blue[b]) * wp.min(1.0, wp.max(CELL - blocked, 0.0) / c)
     out_access[i] = wp.clamp(1.0 - occ, 0.0, 1.0)
     if with_light != 0:
         out_light[i] = light

@@ -16,7 +16,7 @@ import warp as wp
 
 from .. import device as device_mod
 from ..elements import Elements
-from ..formfactor import disk_ff, triangle_ff
+from ..formfactor import disk_ff, fan_ff
 
 # Below this many disk areas of squared distance the disk approximation is replaced by the
 # exact form factor of the sender's triangles. ALGORITHMS.md §1 suggests 4–8 for a fast method;
@@ -31,24 +31,6 @@ class Solution:
 
     indirect: np.ndarray
     counts: dict = field(default_factory=dict)
-
-
-@wp.func
-def fan_ff(p: wp.vec3, n: wp.vec3, j: int, fan_offsets: wp.array(dtype=wp.int32),
-           fan_triangles: wp.array(dtype=wp.int32), tris: wp.array(dtype=wp.int32),
-           points: wp.array(dtype=wp.vec3)) -> float:
-    """Exact form factor from p to the front faces of element j's share (a third) of its triangles."""
-    s = float(0.0)
-    for k in range(fan_offsets[j], fan_offsets[j + 1]):
-        t = fan_triangles[k]
-        a = points[tris[3 * t]]
-        b = points[tris[3 * t + 1]]
-        c = points[tris[3 * t + 2]]
-        nt = wp.cross(b - a, c - a)
-        h = wp.dot(p - a, nt)
-        if h > 1.0e-6 * wp.length(nt) * wp.length(p - a):
-            s += triangle_ff(p, n, a, b, c)
-    return s / 3.0
 
 
 @wp.func
@@ -88,7 +70,7 @@ def element_ff(p: wp.vec3, n: wp.vec3, j: int, pos: wp.array(dtype=wp.vec3),
                tris: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3)) -> float:
     d = pos[j] - p
     if wp.dot(d, d) < NEAR * area[j]:
-        return fan_ff(p, n, j, fan_offsets, fan_triangles, tris, points)
+        return fan_ff(p, n, j, 1.0, fan_offsets, fan_triangles, tris, points)
     return disk_ff(p, n, pos[j], nrm[j], area[j])
 
 

@@ -66,10 +66,31 @@ def test_senders_beyond_the_ao_distance_do_not_occlude(dev):
     assert far.accessibility[0] == pytest.approx(1.0, abs=1e-6)
 
 
-def test_back_faces_do_not_occlude(dev):
-    """Front-facing senders only (ALGORITHMS.md §1): a disk turned away casts no occlusion."""
+def test_a_disk_seen_from_behind_still_occludes(dev):
+    """Cycles' AO rays stop at either face: a disk turned away blocks as much as one facing."""
     g, _ = _gather([shapes.disk(1.0, 16, 64, z=1.0, flip=False)], ORIGIN, UP, dev)
-    assert g.accessibility[0] == pytest.approx(1.0, abs=1e-6)
+    assert 1.0 - g.accessibility[0] == pytest.approx(0.5, abs=0.03)
+
+
+def test_a_closed_ball_overhead_occludes_its_solid_angle_once(dev):
+    """Radius 0.5 at 1.5 m on the axis: occlusion sin²α = (0.5/1.5)² = 1/9; its near (front) and
+    far (back) faces lie in the same directions and must not add up to 2/9."""
+    p, n, t = shapes.icosphere(0.5, 3, inward=False)
+    g, _ = _gather([(p + np.array([0.0, 0.0, 1.5], np.float32), n, t)], ORIGIN, UP, dev)
+    assert 1.0 - g.accessibility[0] == pytest.approx(1.0 / 9.0, abs=0.02)
+
+
+def test_surfaces_in_contact_occlude_each_other(dev):
+    """A box face lying on the floor and the floor under it are dark (as Cycles' offset rays see
+    them); the floor away from the box is not."""
+    floor = shapes.grid(4.0, 20)
+    lid = shapes.grid(1.0, 5, z=0.0, flip=True)  # the bottom face of a box, touching the floor
+    top = shapes.grid(1.0, 5, z=0.5)
+    points = np.array([[0.1, 0.05, 0.0], [0.1, 0.05, 0.0], [1.9, 1.9, 0.0]], np.float32)
+    normals = np.array([[0, 0, 1], [0, 0, -1], [0, 0, 1]], np.float32)
+    g, _ = _gather([floor, lid, top], points, normals, dev)
+    assert g.accessibility[0] < 0.05 and g.accessibility[1] < 0.05
+    assert g.accessibility[2] > 0.9
 
 
 def _cluttered():
@@ -79,7 +100,7 @@ def _cluttered():
     ball = (ball[0] + np.array([0.0, 0.0, 0.7], np.float32), ball[1], ball[2])
     wall = shapes.grid(4.0, 30)
     wall = (wall[0][:, [2, 1, 0]] + np.array([1.5, 0.0, 2.0], np.float32),
-            np.tile(np.array([-1.0, 0.0, 0.0], np.float32), (len(wall[0]), 1)), wall[2][:, ::-1].copy())
+            np.tile(np.array([-1.0, 0.0, 0.0], np.float32), (len(wall[0]), 1)), wall[2])
     return [floor, ball, wall]
 
 
@@ -99,7 +120,7 @@ def test_bent_normal_leans_away_from_an_occluding_wall(dev):
     """Beside a wall rising on the +x side, the least occluded direction tilts towards −x."""
     wall = shapes.grid(4.0, 20)
     wall = (wall[0][:, [2, 1, 0]] + np.array([0.5, 0.0, 2.0], np.float32),
-            np.tile(np.array([-1.0, 0.0, 0.0], np.float32), (len(wall[0]), 1)), wall[2][:, ::-1].copy())
+            np.tile(np.array([-1.0, 0.0, 0.0], np.float32), (len(wall[0]), 1)), wall[2])
     g, _ = _gather([wall], ORIGIN, UP, dev)
     bent = g.bent_normal[0]
     assert np.linalg.norm(bent) == pytest.approx(1.0, abs=1e-5)

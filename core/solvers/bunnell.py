@@ -1,0 +1,37 @@
+"""Bunnell-style one-bounce indirect light over the disk tree: O(n log n), no rays.
+
+Each element's front face sends radiance ρ ⊙ D (D its direct lighting from ``core.direct``, which
+already holds lamps and emissive triangles with ray-traced shadows). One gather traverses the
+hierarchy from every element with the transfer term of the AO (``ao.gather``: disk form factors
+far away, exact triangle form factors near, the tree's clusters in between) and is shadowed the
+way the accessibility is: senders landing in the same direction cell of the receiver's
+hemisphere share the cell's measure instead of adding up, and near-field senders take their part
+of a cell first. Occlusion finer than a cell (1/32 of the hemisphere) is not resolved: a small
+occluder in front of a bright surface hides only as much as it fills its cell. Back faces send
+nothing.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import device as device_mod
+from .. import hierarchy as hierarchy_mod
+from ..elements import Elements
+from . import ao
+from .reference import Solution
+
+
+def solve(geometry, els: Elements, direct: np.ndarray, settings, dev: device_mod.Device,
+          progress=None, hier=None) -> Solution:
+    """One bounce of indirect lighting per element (float32[n,3], irradiance/π) from direct
+    lighting ``direct`` (float32[n,3]): ``I = G(ρ ⊙ D)``, G the gather above. ``settings.bounces``
+    is not used: the method is one bounce (more bounces of the same gather compound its error,
+    see README). ``hier``: the hierarchy over ``els`` (built here when None); progress(stage,
+    fraction).
+    """
+    if hier is None:
+        hier = hierarchy_mod.build(els, dev, geometry)
+    radiance = hierarchy_mod.node_means(hier, (els.albedo * direct).astype(np.float32))
+    g = ao.gather(hier, els, els.position, els.normal, geometry.far, dev, radiance=radiance,
+                  progress=None if progress is None else (lambda f: progress("gather", f)))
+    return Solution(g.light.astype(np.float32), {"nodes": hier.count, "iterations": 1})
