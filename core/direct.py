@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .formfactor import ellipse_point, lamp_outline_ff, tangent_frame, triangle_ff
+from .formfactor import outline_ff, tangent_frame, triangle_ff
 from .scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SceneData
 
 PI = math.pi
@@ -90,6 +90,34 @@ def _visible(mesh: wp.uint64, origin: wp.vec3, target: wp.vec3) -> float:
 
 
 @wp.func
+def _stratum(k: int, side: int, jitter_u: float, jitter_v: float) -> wp.vec2:
+    """A point of stratum k of a side×side grid over the unit square, jittered within it."""
+    inv = 1.0 / float(side)
+    return wp.vec2((float(k % side) + jitter_u) * inv, (float(k / side) + jitter_v) * inv)
+
+
+@wp.func
+def _disk(s: wp.vec2, u: wp.vec3, v: wp.vec3, rx: float, ry: float) -> wp.vec3:
+    """Offset of the uniform point s (unit square) of the ellipse with radii rx, ry along u, v."""
+    r = wp.sqrt(s[0])
+    phi = 6.283185307179586 * s[1]
+    return u * (rx * r * wp.cos(phi)) + v * (ry * r * wp.sin(phi))
+
+
+@wp.func
+def _weighted_visibility(mesh: wp.uint64, origin: wp.vec3, p: wp.vec3, n: wp.vec3, q: wp.vec3,
+                         nq: wp.vec3) -> wp.vec2:
+    """(w, w·V) for a sample q of a planar sender with normal nq: w = cos_R·|cos_E|/d², the
+    transfer kernel, and V the visibility of q (no ray where w = 0)."""
+    d = q - p
+    d2 = wp.dot(d, d)
+    w = wp.max(wp.dot(n, d), 0.0) * wp.abs(wp.dot(nq, d)) / (d2 * d2 + 1.0e-30)
+    if w <= 0.0:
+        return wp.vec2(0.0, 0.0)
+    return wp.vec2(w, w * _visible(mesh, origin, q))
+
+
+@wp.func
 def _spot_factor(kind: int, w_from_lamp: wp.vec3, axis: wp.vec3, cos_half: float, smooth: float) -> float:
     """Blender/Cycles spot cone: smoothstep of (cos angle − cos half-angle) over the blend width."""
     if kind != LAMP_SPOT:
@@ -119,7 +147,6 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
     n = normals[i]
     origin = p + n * eps
     state = wp.rand_init(seed, i)
-    inv_side = 1.0 / float(side)
     count = side * side
     total = wp.vec3(0.0)
     nrays = int(0)
@@ -148,11 +175,8 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
             else:
                 t1, t2 = tangent_frame(w)
                 for k in range(count):
-                    su = (float(k % side) + wp.randf(state)) * inv_side
-                    sv = (float(k / side) + wp.randf(state)) * inv_side
-                    r = radius * wp.sqrt(su)
-                    phi = 6.283185307179586 * sv
-                    q = lamp_pos[l] + t1 * (r * wp.cos(phi)) + t2 * (r * wp.sin(phi))
+                    st = _stratum(k, side, wp.randf(state), wp.randf(state))
+                    q = lamp_pos[l] + _disk(st, t1, t2, radius, radius)
                     att = _spot_factor(kind, wp.normalize(p - q), lamp_dir[l], lamp_cos_half[l],
                                        lamp_smooth[l])
                     if att > 0.0:
@@ -174,11 +198,8 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
             else:
                 t1, t2 = tangent_frame(w)
                 for k in range(count):
-                    su = (float(k % side) + wp.randf(state)) * inv_side
-                    sv = (float(k / side) + wp.randf(state)) * inv_side
-                    r = tan_half * wp.sqrt(su)
-                    phi = 6.283185307179586 * sv
-                    ws = wp.normalize(w + t1 * (r * wp.cos(phi)) + t2 * (r * wp.sin(phi)))
+                    st = _stratum(k, side, wp.randf(state), wp.randf(state))
+                    ws = wp.normalize(w + _disk(st, t1, t2, tan_half, tan_half))
                     vis += _visible(mesh, origin, origin + ws * far)
                 vis = vis / float(count)
                 nrays += count
@@ -192,36 +213,24 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
             hy = 0.5 * lamp_size[l][1]
             ell = lamp_shape[l]
             area = 4.0 * hx * hy
-            ff = float(0.0)
             if ell != 0:
                 area = 3.141592653589793 * hx * hy
-                ff = lamp_outline_ff(p, n, c, lamp_u[l], lamp_v[l], hx * ellipse_scale, hy * ellipse_scale, 1, ellipse_sides)
-            else:
-                ff = lamp_outline_ff(p, n, c, lamp_u[l], lamp_v[l], hx, hy, 0, 4)
+            # an ellipse's outline polygon is scaled to the ellipse's area
+            scale = wp.where(ell != 0, ellipse_scale, 1.0)
+            ff = outline_ff(p, n, ell, ellipse_sides, c, lamp_u[l], lamp_v[l], hx * scale, hy * scale)
             if ff <= 0.0 or area <= 0.0:
                 continue
-            wsum = float(0.0)
-            vsum = float(0.0)
+            acc = wp.vec2(0.0, 0.0)
             for k in range(count):
-                su = (float(k % side) + wp.randf(state)) * inv_side
-                sv = (float(k / side) + wp.randf(state)) * inv_side
-                q = wp.vec3(0.0)
-                if ell != 0:
-                    r = wp.sqrt(su)
-                    phi = 6.283185307179586 * sv
-                    q = c + lamp_u[l] * (hx * r * wp.cos(phi)) + lamp_v[l] * (hy * r * wp.sin(phi))
-                else:
-                    q = c + lamp_u[l] * (hx * (2.0 * su - 1.0)) + lamp_v[l] * (hy * (2.0 * sv - 1.0))
-                d = q - p
-                d2 = wp.dot(d, d)
-                wgt = wp.max(wp.dot(n, d), 0.0) * wp.max(-wp.dot(axis, d), 0.0) / (d2 * d2 + 1.0e-30)
-                wsum += wgt
-                if wgt > 0.0:
-                    vsum += wgt * _visible(mesh, origin, q)
+                st = _stratum(k, side, wp.randf(state), wp.randf(state))
+                q = c + _disk(st, lamp_u[l], lamp_v[l], hx, hy)
+                if ell == 0:
+                    q = c + lamp_u[l] * (hx * (2.0 * st[0] - 1.0)) + lamp_v[l] * (hy * (2.0 * st[1] - 1.0))
+                acc += _weighted_visibility(mesh, origin, p, n, q, axis)
             nrays += count
-            if wsum > 0.0:
+            if acc[0] > 0.0:
                 # radiance of a one-sided area lamp: P / (π A)
-                total += power * (ff * (vsum / wsum) / (3.141592653589793 * area))
+                total += power * (ff * (acc[1] / acc[0]) / (3.141592653589793 * area))
 
     for e in range(em_v0.shape[0]):
         a = em_v0[e]
@@ -233,22 +242,15 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
         ff = triangle_ff(p, n, a, b, c2)
         if ff <= 0.0:
             continue
-        wsum = float(0.0)
-        vsum = float(0.0)
+        acc = wp.vec2(0.0, 0.0)
         for k in range(count):
-            su = (float(k % side) + wp.randf(state)) * inv_side
-            sv = (float(k / side) + wp.randf(state)) * inv_side
-            r = wp.sqrt(su)
-            q = a * (1.0 - r) + b * (r * (1.0 - sv)) + c2 * (r * sv)
-            d = q - p
-            d2 = wp.dot(d, d)
-            wgt = wp.max(wp.dot(n, d), 0.0) * wp.abs(wp.dot(nt, d)) / (d2 * d2 + 1.0e-30)
-            wsum += wgt
-            if wgt > 0.0:
-                vsum += wgt * _visible(mesh, origin, q)
+            st = _stratum(k, side, wp.randf(state), wp.randf(state))
+            r = wp.sqrt(st[0])
+            q = a * (1.0 - r) + b * (r * (1.0 - st[1])) + c2 * (r * st[1])
+            acc += _weighted_visibility(mesh, origin, p, n, q, nt)
         nrays += count
-        if wsum > 0.0:
-            total += em_radiance[e] * (ff * vsum / wsum)
+        if acc[0] > 0.0:
+            total += em_radiance[e] * (ff * acc[1] / acc[0])
 
     out[i] = total
     rays[i] = nrays

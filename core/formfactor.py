@@ -10,6 +10,8 @@ INV_TWO_PI = 0.15915494309189535
 # distance: a sender in the receiver's own plane (a neighbouring triangle of a flat wall) is seen
 # edge-on and contributes nothing.
 HORIZON_EPS = 1.0e-5
+# Outline shapes (outline_point); rectangle and ellipse match core.scene's SHAPE_* codes.
+OUTLINE_RECTANGLE, OUTLINE_ELLIPSE, OUTLINE_TRIANGLE = 0, 1, 2
 
 
 @wp.func
@@ -51,41 +53,7 @@ def clip_edge_term(a: wp.vec3, b: wp.vec3, n: wp.vec3):
 def triangle_ff(p: wp.vec3, n: wp.vec3, v0: wp.vec3, v1: wp.vec3, v2: wp.vec3) -> float:
     """Exact unoccluded form factor from point p (normal n) to triangle v0 v1 v2, either side facing,
     clipped to p's horizon."""
-    a0 = v0 - p
-    a1 = v1 - p
-    a2 = v2 - p
-    s = float(0.0)
-    exit_pt = wp.vec3(0.0)
-    entry_pt = wp.vec3(0.0)
-    has_exit = int(0)
-    has_entry = int(0)
-    t, e, x = clip_edge_term(a0, a1, n)
-    s += t
-    if e == 1:
-        exit_pt = x
-        has_exit = 1
-    if e == 2:
-        entry_pt = x
-        has_entry = 1
-    t, e, x = clip_edge_term(a1, a2, n)
-    s += t
-    if e == 1:
-        exit_pt = x
-        has_exit = 1
-    if e == 2:
-        entry_pt = x
-        has_entry = 1
-    t, e, x = clip_edge_term(a2, a0, n)
-    s += t
-    if e == 1:
-        exit_pt = x
-        has_exit = 1
-    if e == 2:
-        entry_pt = x
-        has_entry = 1
-    if has_exit == 1 and has_entry == 1:
-        s += arc_term(exit_pt, entry_pt, n)
-    return wp.abs(s) * INV_TWO_PI
+    return outline_ff(p, n, OUTLINE_TRIANGLE, 3, v0, v1, v2, 0.0, 0.0)
 
 
 @wp.func
@@ -108,10 +76,18 @@ def fan_ff(p: wp.vec3, n: wp.vec3, j: int, side: float, fan_offsets: wp.array(dt
 
 
 @wp.func
-def ellipse_point(center: wp.vec3, u: wp.vec3, v: wp.vec3, hx: float, hy: float, ellipse: int,
-                  k: int, count: int) -> wp.vec3:
-    """Corner k of the lamp outline: a rectangle (4 corners) or an ellipse as a ``count``-gon."""
-    if ellipse == 0:
+def outline_point(shape: int, k: int, count: int, a: wp.vec3, u: wp.vec3, v: wp.vec3, hx: float,
+                  hy: float) -> wp.vec3:
+    """Corner k (cyclic) of a planar outline: OUTLINE_RECTANGLE / OUTLINE_ELLIPSE (a ``count``-gon)
+    centred at a with half sizes hx, hy along the unit axes u, v; OUTLINE_TRIANGLE: corners a, u, v."""
+    if shape == OUTLINE_TRIANGLE:
+        kk = k % 3
+        if kk == 0:
+            return a
+        if kk == 1:
+            return u
+        return v
+    if shape == OUTLINE_RECTANGLE:
         sx = float(1.0)
         sy = float(1.0)
         kk = k % 4
@@ -119,27 +95,30 @@ def ellipse_point(center: wp.vec3, u: wp.vec3, v: wp.vec3, hx: float, hy: float,
             sx = -1.0
         if kk >= 2:
             sy = -1.0
-        return center + u * (sx * hx) + v * (sy * hy)
+        return a + u * (sx * hx) + v * (sy * hy)
     ang = 6.283185307179586 * float(k % count) / float(count)
-    return center + u * (hx * wp.cos(ang)) + v * (hy * wp.sin(ang))
+    return a + u * (hx * wp.cos(ang)) + v * (hy * wp.sin(ang))
 
 
 @wp.func
-def lamp_outline_ff(p: wp.vec3, n: wp.vec3, center: wp.vec3, u: wp.vec3, v: wp.vec3, hx: float,
-                    hy: float, ellipse: int, count: int) -> float:
-    """Exact unoccluded form factor from p to a planar rectangle or ``count``-gon ellipse outline."""
+def outline_ff(p: wp.vec3, n: wp.vec3, shape: int, count: int, a: wp.vec3, u: wp.vec3, v: wp.vec3,
+               hx: float, hy: float) -> float:
+    """Exact unoccluded form factor from p (normal n) to a convex planar outline (see
+    outline_point), either side facing: Lambert's contour integral of the outline clipped to p's
+    horizon, the clipped part closed along the horizon."""
     nv = 4
-    if ellipse != 0:
+    if shape == OUTLINE_ELLIPSE:
         nv = count
+    if shape == OUTLINE_TRIANGLE:
+        nv = 3
     s = float(0.0)
     exit_pt = wp.vec3(0.0)
     entry_pt = wp.vec3(0.0)
     has_exit = int(0)
     has_entry = int(0)
     for k in range(nv):
-        a = ellipse_point(center, u, v, hx, hy, ellipse, k, count) - p
-        b = ellipse_point(center, u, v, hx, hy, ellipse, k + 1, count) - p
-        t, e, x = clip_edge_term(a, b, n)
+        t, e, x = clip_edge_term(outline_point(shape, k, count, a, u, v, hx, hy) - p,
+                                 outline_point(shape, k + 1, count, a, u, v, hx, hy) - p, n)
         s += t
         if e == 1:
             exit_pt = x

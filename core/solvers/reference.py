@@ -33,123 +33,125 @@ class Solution:
     counts: dict = field(default_factory=dict)
 
 
+@wp.struct
+class Surfels:
+    """Element disks and the triangles they stand for, as the transport kernels read them.
+
+    mesh: BVH id of all triangles; pos, nrm, area: the elements; fan_offsets/fan_triangles: each
+    element's triangles (CSR); tris: flat triangle corners; points: vertex positions; rays: rays
+    per pair; eps: ray offset (m); seed: jitter seed.
+    """
+
+    mesh: wp.uint64
+    pos: wp.array(dtype=wp.vec3)
+    nrm: wp.array(dtype=wp.vec3)
+    area: wp.array(dtype=wp.float32)
+    fan_offsets: wp.array(dtype=wp.int32)
+    fan_triangles: wp.array(dtype=wp.int32)
+    tris: wp.array(dtype=wp.int32)
+    points: wp.array(dtype=wp.vec3)
+    rays: int
+    eps: float
+    seed: int
+
+
 @wp.func
-def fan_sample(j: int, u0: float, u1: float, u2: float, fan_offsets: wp.array(dtype=wp.int32),
-               fan_triangles: wp.array(dtype=wp.int32), tris: wp.array(dtype=wp.int32),
-               points: wp.array(dtype=wp.vec3)) -> wp.vec3:
+def _fan_triangle_area2(s: Surfels, t: int) -> float:
+    a = s.points[s.tris[3 * t]]
+    return wp.length(wp.cross(s.points[s.tris[3 * t + 1]] - a, s.points[s.tris[3 * t + 2]] - a))
+
+
+@wp.func
+def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
     """A point of element j's own surface: on one of its triangles (chosen by area with u0), in the
     half of it nearest to j. Points on the real surface, unlike the tangent disk, stay inside a
     curved closed mesh."""
     total = float(0.0)
-    for k in range(fan_offsets[j], fan_offsets[j + 1]):
-        t = fan_triangles[k]
-        a = points[tris[3 * t]]
-        total += wp.length(wp.cross(points[tris[3 * t + 1]] - a, points[tris[3 * t + 2]] - a))
+    for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
+        total += _fan_triangle_area2(s, s.fan_triangles[k])
     pick = u0 * total
-    chosen = fan_triangles[fan_offsets[j]]
-    for k in range(fan_offsets[j], fan_offsets[j + 1]):
-        t = fan_triangles[k]
-        a = points[tris[3 * t]]
-        pick -= wp.length(wp.cross(points[tris[3 * t + 1]] - a, points[tris[3 * t + 2]] - a))
+    chosen = s.fan_triangles[s.fan_offsets[j]]
+    for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
+        pick -= _fan_triangle_area2(s, s.fan_triangles[k])
         if pick <= 0.0:
-            chosen = t
+            chosen = s.fan_triangles[k]
             break
-    a = points[tris[3 * chosen]]
-    b = points[tris[3 * chosen + 1]]
-    c = points[tris[3 * chosen + 2]]
+    a = s.points[s.tris[3 * chosen]]
+    b = s.points[s.tris[3 * chosen + 1]]
+    c = s.points[s.tris[3 * chosen + 2]]
     r = wp.sqrt(u1)
     q = a * (1.0 - r) + b * (r * (1.0 - u2)) + c * (r * u2)
-    pj = points[j]
+    pj = s.points[j]
     return pj + (q - pj) * 0.5
 
 
 @wp.func
-def element_ff(p: wp.vec3, n: wp.vec3, j: int, pos: wp.array(dtype=wp.vec3),
-               nrm: wp.array(dtype=wp.vec3), area: wp.array(dtype=wp.float32),
-               fan_offsets: wp.array(dtype=wp.int32), fan_triangles: wp.array(dtype=wp.int32),
-               tris: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3)) -> float:
-    d = pos[j] - p
-    if wp.dot(d, d) < NEAR * area[j]:
-        return fan_ff(p, n, j, 1.0, fan_offsets, fan_triangles, tris, points)
-    return disk_ff(p, n, pos[j], nrm[j], area[j])
+def element_ff(s: Surfels, i: int, j: int) -> float:
+    """Form factor from element i's point to the front of element j."""
+    p = s.pos[i]
+    d = s.pos[j] - p
+    if wp.dot(d, d) < NEAR * s.area[j]:
+        return fan_ff(p, s.nrm[i], j, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+    return disk_ff(p, s.nrm[i], s.pos[j], s.nrm[j], s.area[j])
 
 
 @wp.func
-def pair_visibility(mesh: wp.uint64, i: int, j: int, pos: wp.array(dtype=wp.vec3),
-                    nrm: wp.array(dtype=wp.vec3), fan_offsets: wp.array(dtype=wp.int32),
-                    fan_triangles: wp.array(dtype=wp.int32), tris: wp.array(dtype=wp.int32),
-                    points: wp.array(dtype=wp.vec3), rays_per_pair: int, eps: float, seed: int) -> float:
-    """Unblocked fraction of rays from i's point to stratified points of j's own surface, both
-    lifted off their surfaces by eps. Seeded by the pair, so every evaluation gives the same value."""
-    state = wp.rand_init(seed, wp.min(i, j) * 65521 + wp.max(i, j))
-    origin = pos[i] + nrm[i] * eps
+def pair_visibility(s: Surfels, i: int, j: int) -> float:
+    """Unblocked fraction of rays from min(i,j)'s point to stratified points of the other's own
+    surface, both lifted off their surfaces by eps. Seeded by the pair and always traced the same
+    way round, so every evaluation of a pair gives the same value."""
+    lo = wp.min(i, j)
+    hi = wp.max(i, j)
+    state = wp.rand_init(s.seed, lo * 65521 + hi)
+    origin = s.pos[lo] + s.nrm[lo] * s.eps
     hits = float(0.0)
-    for k in range(rays_per_pair):
-        u0 = (float(k) + wp.randf(state)) / float(rays_per_pair)
-        q = fan_sample(j, u0, wp.randf(state), wp.randf(state), fan_offsets, fan_triangles, tris,
-                       points) + nrm[j] * eps
+    for k in range(s.rays):
+        u0 = (float(k) + wp.randf(state)) / float(s.rays)
+        q = fan_sample(s, hi, u0, wp.randf(state), wp.randf(state)) + s.nrm[hi] * s.eps
         d = q - origin
         dist = wp.length(d)
         if dist <= 0.0:
             hits += 1.0
-        elif not wp.mesh_query_ray_anyhit(mesh, origin, d / dist, dist * 0.9999):
+        elif not wp.mesh_query_ray_anyhit(s.mesh, origin, d / dist, dist * 0.9999):
             hits += 1.0
-    return hits / float(rays_per_pair)
+    return hits / float(s.rays)
 
 
 @wp.kernel
-def _pairs_kernel(offset: int, n_el: int, mesh: wp.uint64, pos: wp.array(dtype=wp.vec3),
-                  nrm: wp.array(dtype=wp.vec3), area: wp.array(dtype=wp.float32),
-                  fan_offsets: wp.array(dtype=wp.int32), fan_triangles: wp.array(dtype=wp.int32),
-                  tris: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3),
-                  rays_per_pair: int, eps: float, seed: int,
-                  out: wp.array2d(dtype=wp.float32), rays: wp.array(dtype=wp.int32)):
+def _pairs_kernel(offset: int, n_el: int, s: Surfels, out: wp.array2d(dtype=wp.float32),
+                  rays: wp.array(dtype=wp.int32)):
     """Whole matrix: thread (i, j) with i < j fills both M[i, j] and M[j, i] (one visibility)."""
     idx = wp.tid() + offset
     i = idx / n_el
     j = idx - i * n_el
-    if j <= i or area[i] <= 0.0 or area[j] <= 0.0:
+    if j <= i or s.area[i] <= 0.0 or s.area[j] <= 0.0:
         return
-    f_ij = element_ff(pos[i], nrm[i], j, pos, nrm, area, fan_offsets, fan_triangles, tris, points)
-    f_ji = element_ff(pos[j], nrm[j], i, pos, nrm, area, fan_offsets, fan_triangles, tris, points)
+    f_ij = element_ff(s, i, j)
+    f_ji = element_ff(s, j, i)
     if f_ij <= 0.0 and f_ji <= 0.0:
         return
-    vis = pair_visibility(mesh, i, j, pos, nrm, fan_offsets, fan_triangles, tris, points,
-                          rays_per_pair, eps, seed)
+    vis = pair_visibility(s, i, j)
     out[i, j] = f_ij * vis
     out[j, i] = f_ji * vis
-    wp.atomic_add(rays, 0, rays_per_pair)
+    wp.atomic_add(rays, 0, s.rays)
 
 
 @wp.kernel
-def _rows_kernel(offset: int, n_el: int, row0: int, mesh: wp.uint64, pos: wp.array(dtype=wp.vec3),
-                 nrm: wp.array(dtype=wp.vec3), area: wp.array(dtype=wp.float32),
-                 fan_offsets: wp.array(dtype=wp.int32), fan_triangles: wp.array(dtype=wp.int32),
-                 tris: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3),
-                 rays_per_pair: int, eps: float, seed: int,
-                 out: wp.array2d(dtype=wp.float32), rays: wp.array(dtype=wp.int32)):
+def _rows_kernel(offset: int, n_el: int, row0: int, s: Surfels, out: wp.array2d(dtype=wp.float32),
+                 rays: wp.array(dtype=wp.int32)):
     """Rows row0.. of M into out (block-local row index): the bounded-memory path."""
     idx = wp.tid() + offset
     r = idx / n_el
     j = idx - r * n_el
     i = row0 + r
     out[r, j] = 0.0
-    if i == j or area[i] <= 0.0 or area[j] <= 0.0:
+    if i == j or s.area[i] <= 0.0 or s.area[j] <= 0.0:
         return
-    f_ij = element_ff(pos[i], nrm[i], j, pos, nrm, area, fan_offsets, fan_triangles, tris, points)
+    f_ij = element_ff(s, i, j)
     if f_ij <= 0.0:
         return
-    # Rays always go from the lower to the higher index, so the block path sees the same
-    # visibility as the whole-matrix path.
-    vis = float(0.0)
-    if i < j:
-        vis = pair_visibility(mesh, i, j, pos, nrm, fan_offsets, fan_triangles, tris, points,
-                              rays_per_pair, eps, seed)
-    else:
-        vis = pair_visibility(mesh, j, i, pos, nrm, fan_offsets, fan_triangles, tris, points,
-                              rays_per_pair, eps, seed)
-    out[r, j] = f_ij * vis
-    wp.atomic_add(rays, 0, rays_per_pair)
+    out[r, j] = f_ij * pair_visibility(s, i, j)
+    wp.atomic_add(rays, 0, s.rays)
 
 
 class Transport:
@@ -168,13 +170,19 @@ class Transport:
         d = dev.name
         self.block_rows = n if n * n <= settings.max_pairs else max(1, settings.max_pairs // n)
         self.rays = wp.zeros(1, dtype=wp.int32, device=d)
-        self._common = [geometry.mesh.id, wp.array(els.position, dtype=wp.vec3, device=d),
-                        wp.array(els.normal, dtype=wp.vec3, device=d),
-                        wp.array(els.area, dtype=wp.float32, device=d),
-                        wp.array(els.fan_offsets, dtype=wp.int32, device=d),
-                        wp.array(els.fan_triangles, dtype=wp.int32, device=d),
-                        geometry.indices, geometry.points, int(settings.visibility_rays),
-                        float(geometry.eps), int(settings.seed) + 7919]
+        s = Surfels()
+        s.mesh = geometry.mesh.id
+        s.pos = wp.array(els.position, dtype=wp.vec3, device=d)
+        s.nrm = wp.array(els.normal, dtype=wp.vec3, device=d)
+        s.area = wp.array(els.area, dtype=wp.float32, device=d)
+        s.fan_offsets = wp.array(els.fan_offsets, dtype=wp.int32, device=d)
+        s.fan_triangles = wp.array(els.fan_triangles, dtype=wp.int32, device=d)
+        s.tris = geometry.indices
+        s.points = geometry.points
+        s.rays = int(settings.visibility_rays)
+        s.eps = float(geometry.eps)
+        s.seed = int(settings.seed) + 7919
+        self._surfels = s
         self._buffer = wp.zeros((self.block_rows, n), dtype=wp.float32, device=d)
         self.whole = None
 
@@ -185,7 +193,7 @@ class Transport:
     def build_whole(self, progress=None) -> np.ndarray:
         """Compute and keep the whole matrix (only when held)."""
         n = self.n
-        device_mod.launch(_pairs_kernel, n * n, [n, *self._common, self._buffer, self.rays], self.dev,
+        device_mod.launch(_pairs_kernel, n * n, [n, self._surfels, self._buffer, self.rays], self.dev,
                           chunks=max(1, min(64, n // 64)), on_chunk=progress)
         self.whole = self._buffer.numpy()
         return self.whole
@@ -194,7 +202,7 @@ class Transport:
         """float32[k, n]: rows row0 … row0+k−1 of M (k = block_rows, fewer at the end)."""
         n = self.n
         k = min(self.block_rows, n - row0)
-        device_mod.launch(_rows_kernel, k * n, [n, row0, *self._common, self._buffer, self.rays],
+        device_mod.launch(_rows_kernel, k * n, [n, row0, self._surfels, self._buffer, self.rays],
                           self.dev)
         return self._buffer.numpy()[:k]
 

@@ -4,7 +4,7 @@ import pytest
 import warp as wp
 
 from radiosity_baker.core import device
-from radiosity_baker.core.formfactor import disk_ff, lamp_outline_ff, triangle_ff
+from radiosity_baker.core.formfactor import disk_ff, outline_ff, triangle_ff
 
 device.init_warp()
 
@@ -24,8 +24,8 @@ def _disk_kernel(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, o
 @wp.kernel
 def _outline_kernel(p: wp.vec3, n: wp.vec3, hx: float, hy: float, ellipse: int, count: int,
                     out: wp.array(dtype=float)):
-    out[0] = lamp_outline_ff(p, n, wp.vec3(0.0, 0.0, 1.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0),
-                             hx, hy, ellipse, count)
+    out[0] = outline_ff(p, n, ellipse, count, wp.vec3(0.0, 0.0, 1.0), wp.vec3(1.0, 0.0, 0.0),
+                        wp.vec3(0.0, 1.0, 0.0), hx, hy)
 
 
 def triangles_ff(p, n, tris):
