@@ -100,3 +100,73 @@ def cycles_bake_vertex_colors(object_names, *, passes=("DIRECT", "INDIRECT"), ba
             with _selection_of(view_layer, ob):
                 results[name] = _bake_one(ob, bake_type, passes, attribute)
     return results
+
+
+def cycles_bake_image(object_names, uv_map: str, width: int, height: int, *,
+                      passes=("DIRECT", "INDIRECT"), samples=256, bounces=64, seed=0,
+                      scene=None) -> np.ndarray:
+    """Bake the named mesh objects with Cycles (DIFFUSE, ``passes``, no Color) into one shared
+    ``width`` × ``height`` float image through their UV map ``uv_map``; return float32[H,W,4]
+    (row 0 at the bottom; alpha 1 where Cycles baked a texel, 0 elsewhere; no margin).
+
+    Every object needs a material: a temporary active Image Texture node is added to each of
+    them. Path tracing as in :func:`cycles_bake_vertex_colors`. Nothing is left behind: nodes,
+    image, active UV maps and active nodes, render settings and selection are restored.
+    """
+    scene = scene or bpy.context.scene
+    view_layer = bpy.context.view_layer
+    objects = [scene.objects[n] for n in object_names]
+    for ob in objects:
+        if ob.type != "MESH" or uv_map not in ob.data.uv_layers:
+            raise ValueError(f"{ob.name}: not a mesh with a UV map {uv_map!r}")
+        if not any(s.material is not None and s.material.node_tree is not None for s in ob.material_slots):
+            raise ValueError(f"{ob.name}: has no node material to bake through")
+    image = bpy.data.images.new("CyclesRefBake", width, height, alpha=True, float_buffer=True)
+    image.colorspace_settings.name = "Linear Rec.709"
+    image.generated_color = (0.0, 0.0, 0.0, 0.0)
+    materials = {s.material for ob in objects for s in ob.material_slots if s.material is not None}
+    added, active_nodes = [], {}
+    active_uv = {ob.data: ob.data.uv_layers.active.name for ob in objects}
+    cycles = scene.cycles
+    settings = (
+        (scene.render, "engine", "CYCLES"), (cycles, "device", "CPU"), (cycles, "samples", samples),
+        (cycles, "use_denoising", False), (cycles, "sample_clamp_direct", 0.0),
+        (cycles, "sample_clamp_indirect", 0.0), (cycles, "max_bounces", bounces),
+        (cycles, "diffuse_bounces", bounces), (cycles, "seed", seed),
+        (cycles, "use_adaptive_sampling", False), (scene.render.bake, "target", "IMAGE_TEXTURES"),
+        (scene.render.bake, "margin", 0), (scene.render.bake, "use_clear", False),
+    )
+    selected = [o for o in view_layer.objects if o.select_get()]
+    active = view_layer.objects.active
+    try:
+        for mat in materials:
+            nodes = mat.node_tree.nodes
+            active_nodes[mat] = nodes.active
+            node = nodes.new("ShaderNodeTexImage")
+            node.image = image
+            nodes.active = node
+            added.append((mat, node))
+        for ob in objects:
+            ob.data.uv_layers.active = ob.data.uv_layers[uv_map]
+        with _patched(*settings):
+            for o in selected:
+                o.select_set(False)
+            for ob in objects:
+                ob.select_set(True)
+            view_layer.objects.active = objects[0]
+            bpy.ops.object.bake(type="DIFFUSE", pass_filter=set(passes))
+        px = np.empty(width * height * 4, np.float32)
+        image.pixels.foreach_get(px)
+        return px.reshape(height, width, 4)
+    finally:
+        for ob in objects:
+            ob.select_set(False)
+        for o in selected:
+            o.select_set(True)
+        view_layer.objects.active = active
+        for mesh, name in active_uv.items():
+            mesh.uv_layers.active = mesh.uv_layers[name]
+        for mat, node in added:
+            mat.node_tree.nodes.remove(node)
+            mat.node_tree.nodes.active = active_nodes[mat]
+        bpy.data.images.remove(image)

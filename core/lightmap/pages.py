@@ -253,7 +253,7 @@ def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, 
         parts = [np.einsum("nk,nkc->nc", r[0].bary, values[r[1][r[0].triangle]]) for r in rastered]
         return np.concatenate(parts).astype(np.float32) if parts else np.zeros((0, 3), np.float32)
 
-    indirect = interpolate(per_vertex["indirect"])
+    indirect = stages.run("texel indirect", interpolate, per_vertex["indirect"])
     lighting = lit_direct + indirect
     tri = np.concatenate([r[2][r[0].triangle] for r in rastered]) if rastered else np.zeros(0, np.int64)
     contents = {"lighting": lighting, "indirect": indirect,
@@ -265,18 +265,19 @@ def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, 
                         f"use one of {', '.join(contents)}")
     values = contents[settings.content]
 
-    result_pages = []
-    start = 0
-    seam_error = 0.0
-    for (name, objects, (w, h), density, members), r in zip(pages, rastered):
-        texels = r[0]
-        v = values[start:start + texels.count]
-        start += texels.count
-        rgb, covered = _resolve(texels, v, w, h, s)
-        rgb = dilate(rgb, covered, settings.padding)
-        result_pages.append(Page(name, objects, rgb, covered, density))
-        for m in members:
-            seam_error = max(seam_error, seam_difference(rgb, uvs[m.mesh_name], m))
+    def assemble():
+        out, start, seam_error = [], 0, 0.0
+        for (name, objects, (w, h), density, members), r in zip(pages, rastered):
+            texels = r[0]
+            rgb, covered = _resolve(texels, values[start:start + texels.count], w, h, s)
+            start += texels.count
+            rgb = dilate(rgb, covered, settings.padding)
+            out.append(Page(name, objects, rgb, covered, density))
+            for m in members:
+                seam_error = max(seam_error, seam_difference(rgb, uvs[m.mesh_name], m))
+        return out, seam_error
+
+    result_pages, seam_error = stages.run("dilate", assemble)
     return LightmapResult(pages=result_pages, uv=made, seam_error=seam_error,
                           texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings)
 
