@@ -33,6 +33,12 @@ def _generate(meshes, density: float, padding: int):
     return atlas
 
 
+def _area(pos: np.ndarray, idx: np.ndarray) -> float:
+    """Surface area (m²) of the triangles idx over pos."""
+    p = pos.astype(np.float64)[idx.astype(np.int64)]
+    return 0.5 * float(np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+
+
 def main(path_in: str, path_out: str) -> int:
     data = np.load(path_in)
     out = {}
@@ -40,9 +46,12 @@ def main(path_in: str, path_out: str) -> int:
         meshes = [(np.ascontiguousarray(data[f"a{a}_m{m}_pos"], np.float32),
                    np.ascontiguousarray(data[f"a{a}_m{m}_idx"], np.uint32))
                   for m in range(int(data[f"a{a}_meshes"]))]
-        density = float(data[f"a{a}_density"])
         max_size = int(data[f"a{a}_max_size"])
         padding = int(data[f"a{a}_padding"])
+        # No page can hold more texels than max_size²: start at most at the density that fills
+        # it exactly (a far too high density makes xatlas build enormous charts first).
+        area = sum(_area(pos, idx) for pos, idx in meshes)
+        density = min(float(data[f"a{a}_density"]), max_size / max(area, 1e-30) ** 0.5)
         for _ in range(MAX_TRIES):
             atlas = _generate(meshes, density, padding)
             side = max(atlas.width, atlas.height)

@@ -22,7 +22,7 @@ from ..errors import BakeError
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
-_CACHE_VERSION = b"rb-unwrap-1"
+_CACHE_VERSION = b"rb-unwrap-2"
 
 
 @dataclass
