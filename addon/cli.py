@@ -195,12 +195,14 @@ def _bake(args) -> int:
 
 
 def _check_writable(path: Path) -> None:
-    """Raise UsageError unless a file can be created at ``path`` (checked before baking)."""
+    """Raise UsageError unless a file can be created at ``path`` (checked before baking); missing
+    parent folders are created."""
     if path.is_dir():
         raise UsageError(f"cannot write {path}: it is a directory")
     if path.exists() and not os.access(path, os.W_OK):
         raise UsageError(f"cannot write {path}: permission denied")
     try:  # creating a file is the only test that holds for every file system and user
+        path.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".radiosity_baker_"):
             pass
     except OSError as exc:
@@ -247,6 +249,7 @@ def _report(job: BakeJob, settings: Settings, blend: str, outputs: dict) -> dict
         "warnings": job.warnings,
         "input": blend,
         "outputs": outputs,
+        "lightmaps": {page: str(path) for page, path in job.lightmap_files.items()},
     }
 
 

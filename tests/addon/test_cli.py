@@ -120,6 +120,13 @@ def test_bad_arguments_are_one_line_errors(argv, capsys):
     one_error_line(capsys)
 
 
+def test_missing_output_folders_are_created(lit_blend, tmp_path):
+    out = tmp_path / "new" / "folder"
+    assert cli.main(["bake", str(lit_blend), "--method", "direct", "--save", str(out / "baked.blend"),
+                     "--report", str(out / "report.json")]) == 0
+    assert (out / "baked.blend").is_file() and (out / "report.json").is_file()
+
+
 def test_build_extension_subcommand_reaches_the_builder(capsys):
     assert cli.main(["build-extension", "--help"]) == 0
     assert "--fetch-wheels" in capsys.readouterr().out
