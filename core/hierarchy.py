@@ -1,16 +1,19 @@
 """Cluster tree over the element disks, built data-parallel in Warp.
 
-The leaves are the element disks sorted along a Morton (Z-order) curve of their positions; every
-BRANCH consecutive nodes of a level are merged into one parent, level by level, up to one root (a
-bottom-up merge: each level is one launch, so building costs O(n) work in O(log n) launches and
-no Python loop over nodes). Each node is a disk standing for its subtree: area-weighted position,
-area-weighted mean normal (unit) with its length kept as ``spread`` (1: all normals agree, 0: they
-cancel), summed area and a bounding radius of the subtree's disks.
+The leaves are the element disks sorted by the Morton (Z-order) code of their positions
+(``wp.utils.radix_sort_pairs``). The tree above them is the octree those codes spell, built
+bottom-up one level per launch: the nodes of level l are the distinct runs of ``code >> 3l``
+among the sorted leaves (flags where the prefix changes, an inclusive scan numbering the runs),
+so every node is an octree cell holding 1–8 children (a cell with many coincident leaves holds
+them all), and a level stops at a single root. O(n) work in O(Morton bits) launches, no Python
+loop over nodes. Each node is a disk standing for its subtree: area-weighted position,
+area-weighted mean normal (unit) with its length kept as ``spread`` (1: all normals agree, 0:
+they cancel), summed area and a bounding radius of the subtree's disks.
 
-Nodes are stored in one array, level by level, leaves first and the root last. Traversal is
-stackless: ``first_child`` descends, ``next`` is where to go when a subtree is done (the next
-sibling, else the parent's ``next``; −1 after the last node), so one ``while`` loop per receiver
-visits a cut of the tree in depth-first order.
+Nodes are stored in one array, level by level, leaves first and the root last; a node's children
+are consecutive. Traversal is stackless: ``descend`` goes down (skipping one-child cells), ``next`` is where to go when a
+subtree is done (the next sibling, else the parent's ``next``; −1 after the last node), so one
+``while`` loop per receiver visits a cut of the tree in depth-first order.
 """
 from __future__ import annotations
 
@@ -22,25 +25,27 @@ import warp as wp
 from . import device as device_mod
 from .elements import Elements
 
-# Children per node. 4 keeps the tree shallow (10 levels for a million disks) while a parent
-# still covers a compact run of the Morton curve.
-BRANCH = 4
-# Levels a traversal can track (see solvers/ao.py): 4^31 leaves.
-MAX_LEVELS = 32
 MORTON_BITS = 10  # per axis: 30-bit codes
+# Levels of the tree at most: the leaves and one per Morton bit (the traversal keeps a weight per level).
+MAX_LEVELS = MORTON_BITS + 1
 
 
 @dataclass
 class Hierarchy:
-    """m nodes over n element disks (m ≈ 4n/3), all Warp arrays on ``device``.
+    """m nodes over n element disks, all Warp arrays on ``device``.
 
     position: vec3[m] (m), normal: vec3[m] unit area-weighted mean normal, spread: float32[m] length
     of the area-weighted mean of the unit normals (1 for a leaf), area: float32[m] (m²), radius:
     float32[m] (m) bounding radius of the subtree's disks around ``position`` (a leaf: √(area/π)),
-    first_child: int32[m] (−1 for a leaf), next: int32[m] (−1: traversal ends), level: int32[m] (0
-    for leaves), element: int32[m] the element of a leaf (−1 for inner nodes), order: int32[n] the
-    elements in leaf order (kept for refits). tri_points: vec3[V] and tri_indices: int32[3T], the
-    scene's triangles (shared with ``direct.SceneGeometry``), for exact near-field form factors.
+    leaves: float32[m] number of disks in the subtree,
+    first_child: int32[m] (−1 for a leaf; the children are first_child … up to the next node's
+    first child, or the level's end), descend: int32[m] the child a traversal opening the node goes
+    to (its first child, past cells with a single child, which repeat their child's disk; −1 for a
+    leaf), parent: int32[m] (−1 for the root), next: int32[m] (−1:
+    traversal ends), level: int32[m] (0 for leaves), element: int32[m] the element of a leaf (−1
+    for inner nodes), order: int32[n] the elements in leaf order (kept for refits). tri_points:
+    vec3[V] and tri_indices: int32[3T], the scene's triangles (shared with
+    ``direct.SceneGeometry``), for exact near-field form factors.
     level_offsets: numpy int64[L+1], nodes of level l are level_offsets[l] … level_offsets[l+1]−1;
     root = m − 1.
     """
@@ -50,7 +55,10 @@ class Hierarchy:
     spread: wp.array
     area: wp.array
     radius: wp.array
+    leaves: wp.array
     first_child: wp.array
+    descend: wp.array
+    parent: wp.array
     next: wp.array
     level: wp.array
     element: wp.array
@@ -94,7 +102,8 @@ def _leaf_kernel(offset: int, order: wp.array(dtype=wp.int32), pos: wp.array(dty
                  nrm: wp.array(dtype=wp.vec3), area: wp.array(dtype=wp.float32),
                  n_pos: wp.array(dtype=wp.vec3), n_nrm: wp.array(dtype=wp.vec3),
                  n_spread: wp.array(dtype=wp.float32), n_area: wp.array(dtype=wp.float32),
-                 n_radius: wp.array(dtype=wp.float32), n_element: wp.array(dtype=wp.int32)):
+                 n_radius: wp.array(dtype=wp.float32), n_leaves: wp.array(dtype=wp.float32),
+                 n_element: wp.array(dtype=wp.int32)):
     k = wp.tid() + offset
     e = order[k]
     a = wp.max(area[e], 0.0)
@@ -103,25 +112,36 @@ def _leaf_kernel(offset: int, order: wp.array(dtype=wp.int32), pos: wp.array(dty
     n_spread[k] = 1.0
     n_area[k] = a
     n_radius[k] = wp.sqrt(a / 3.141592653589793)
+    n_leaves[k] = 1.0
     n_element[k] = e
 
 
+@wp.func
+def _child_end(node: int, level_end: int, child_level_end: int, first_child: wp.array(dtype=wp.int32)) -> int:
+    if node + 1 < level_end:
+        return first_child[node + 1]
+    return child_level_end
+
+
 @wp.kernel
-def _merge_kernel(offset: int, child0: int, child_end: int, node0: int,
+def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
                   n_pos: wp.array(dtype=wp.vec3), n_nrm: wp.array(dtype=wp.vec3),
                   n_spread: wp.array(dtype=wp.float32), n_area: wp.array(dtype=wp.float32),
-                  n_radius: wp.array(dtype=wp.float32), first_child: wp.array(dtype=wp.int32)):
-    """Node node0 + k of a level from children child0 + BRANCH·k … (fewer at the level's end)."""
-    k = wp.tid() + offset
-    c0 = child0 + BRANCH * k
-    c1 = wp.min(c0 + BRANCH, child_end)
+                  n_radius: wp.array(dtype=wp.float32), n_leaves: wp.array(dtype=wp.float32),
+                  first_child: wp.array(dtype=wp.int32)):
+    """Disk of node node0 + k from its children's disks."""
+    node = node0 + wp.tid() + offset
+    c0 = first_child[node]
+    c1 = _child_end(node, level_end, child_level_end, first_child)
     total = float(0.0)
+    count = float(0.0)
     centre = wp.vec3(0.0)
     plain = wp.vec3(0.0)
     mean_n = wp.vec3(0.0)
     for c in range(c0, c1):
         a = n_area[c]
         total += a
+        count += n_leaves[c]
         centre += n_pos[c] * a
         plain += n_pos[c]
         mean_n += n_nrm[c] * (a * n_spread[c])
@@ -134,7 +154,6 @@ def _merge_kernel(offset: int, child0: int, child_end: int, node0: int,
     for c in range(c0, c1):
         r = wp.max(r, wp.length(n_pos[c] - centre) + n_radius[c])
     s = wp.length(mean_n)
-    node = node0 + k
     n_pos[node] = centre
     n_spread[node] = s
     if s > 0.0:
@@ -143,26 +162,65 @@ def _merge_kernel(offset: int, child0: int, child_end: int, node0: int,
         n_nrm[node] = wp.vec3(0.0, 0.0, 1.0)
     n_area[node] = total
     n_radius[node] = r
-    first_child[node] = c0
+    n_leaves[node] = count
 
 
 @wp.kernel
-def _next_kernel(offset: int, node0: int, size: int, parent0: int, next_node: wp.array(dtype=wp.int32)):
-    """Escape pointers of one level from those of the level above (already set)."""
-    k = wp.tid() + offset
-    if k % BRANCH != BRANCH - 1 and k + 1 < size:
-        next_node[node0 + k] = node0 + k + 1
+def _flag_kernel(offset: int, keys: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32)):
+    """1 where a child's parent cell (its key without the last 3 bits) differs from the previous."""
+    i = wp.tid() + offset
+    flags[i] = int(i == 0 or (keys[i] >> 3) != (keys[i - 1] >> 3))
+
+
+@wp.kernel
+def _link_kernel(offset: int, keys: wp.array(dtype=wp.int32), run: wp.array(dtype=wp.int32),
+                 parent_keys: wp.array(dtype=wp.int32), parent_local: wp.array(dtype=wp.int32),
+                 first_local: wp.array(dtype=wp.int32)):
+    """Child i (in a level) → its parent's index in the next level; the first child of each run
+    records itself and the parent's key."""
+    i = wp.tid() + offset
+    p = run[i] - 1
+    parent_local[i] = p
+    if i == 0 or (keys[i] >> 3) != (keys[i - 1] >> 3):
+        first_local[p] = i
+        parent_keys[p] = keys[i] >> 3
+
+
+@wp.kernel
+def _place_kernel(offset: int, child0: int, node0: int, parent_local: wp.array(dtype=wp.int32),
+                  first_local: wp.array(dtype=wp.int32), size: int, parent: wp.array(dtype=wp.int32),
+                  first_child: wp.array(dtype=wp.int32), level: wp.array(dtype=wp.int32), lv: int):
+    """Global parent / first-child indices of one level's links (child level at child0, parent
+    level at node0)."""
+    i = wp.tid() + offset
+    parent[child0 + i] = node0 + parent_local[i]
+    if i < size:
+        first_child[node0 + i] = child0 + first_local[i]
+        level[node0 + i] = lv
+
+
+@wp.kernel
+def _descend_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
+                    first_child: wp.array(dtype=wp.int32), descend: wp.array(dtype=wp.int32)):
+    """Where opening a node leads, from the level below (already set)."""
+    g = node0 + wp.tid() + offset
+    c = first_child[g]
+    if _child_end(g, level_end, child_level_end, first_child) - c == 1 and descend[c] >= 0:
+        descend[g] = descend[c]
     else:
-        next_node[node0 + k] = next_node[parent0 + k / BRANCH]
+        descend[g] = c
 
 
-def _level_offsets(n: int) -> np.ndarray:
-    sizes = [n]
-    while sizes[-1] > 1:
-        sizes.append(-(-sizes[-1] // BRANCH))
-    if len(sizes) > MAX_LEVELS:
-        raise ValueError(f"{n} elements exceed the hierarchy's {MAX_LEVELS} levels")
-    return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+@wp.kernel
+def _next_kernel(offset: int, node0: int, level_end: int, parent: wp.array(dtype=wp.int32),
+                 next_node: wp.array(dtype=wp.int32)):
+    """Escape pointers of one level from those of the level above (already set)."""
+    g = node0 + wp.tid() + offset
+    p = parent[g]
+    if g + 1 < level_end and parent[g + 1] == p:
+        next_node[g] = g + 1
+    else:
+        next_node[g] = next_node[p]
 
 
 def build(els: Elements, dev: device_mod.Device, geometry) -> Hierarchy:
@@ -175,8 +233,6 @@ def build(els: Elements, dev: device_mod.Device, geometry) -> Hierarchy:
     if n < 1:
         raise ValueError("a hierarchy needs at least one element")
     d = dev.name
-    offsets = _level_offsets(n)
-    m = int(offsets[-1])
     lo = els.position.min(axis=0).astype(np.float32)
     extent = float((els.position.max(axis=0) - lo).max())
     keys = wp.empty(2 * n, dtype=wp.int32, device=d)
@@ -185,21 +241,45 @@ def build(els: Elements, dev: device_mod.Device, geometry) -> Hierarchy:
                                           1.0 / extent if extent > 0 else 0.0, keys, order], dev)
     wp.utils.radix_sort_pairs(keys, order, n)
 
+    # Levels bottom-up: each one the distinct parent cells of the one below.
+    sizes, links = [n], []
+    level_keys = keys[:n]
+    while sizes[-1] > 1:
+        size = sizes[-1]
+        run = wp.empty(size, dtype=wp.int32, device=d)
+        device_mod.launch(_flag_kernel, size, [level_keys, run], dev)
+        wp.utils.array_scan(run, run, inclusive=True)
+        count = int(run[size - 1:size].numpy()[0])
+        parent_keys = wp.empty(count, dtype=wp.int32, device=d)
+        parent_local = wp.empty(size, dtype=wp.int32, device=d)
+        first_local = wp.empty(count, dtype=wp.int32, device=d)
+        device_mod.launch(_link_kernel, size, [level_keys, run, parent_keys, parent_local, first_local], dev)
+        links.append((parent_local, first_local))
+        sizes.append(count)
+        level_keys = parent_keys
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    m = int(offsets[-1])
+
     h = Hierarchy(position=wp.empty(m, dtype=wp.vec3, device=d), normal=wp.empty(m, dtype=wp.vec3, device=d),
                   spread=wp.empty(m, dtype=wp.float32, device=d), area=wp.empty(m, dtype=wp.float32, device=d),
-                  radius=wp.empty(m, dtype=wp.float32, device=d),
+                  radius=wp.empty(m, dtype=wp.float32, device=d), leaves=wp.empty(m, dtype=wp.float32, device=d),
                   first_child=wp.full(m, -1, dtype=wp.int32, device=d),
-                  next=wp.empty(m, dtype=wp.int32, device=d), level=wp.empty(m, dtype=wp.int32, device=d),
-                  element=wp.full(m, -1, dtype=wp.int32, device=d), order=order[:n], tri_points=geometry.points,
-                  tri_indices=geometry.indices, level_offsets=offsets,
-                  device=dev)
-    level = np.repeat(np.arange(len(offsets) - 1, dtype=np.int32), np.diff(offsets))
-    h.level.assign(level)
+                  descend=wp.full(m, -1, dtype=wp.int32, device=d),
+                  parent=wp.full(m, -1, dtype=wp.int32, device=d), next=wp.full(m, -1, dtype=wp.int32, device=d),
+                  level=wp.zeros(m, dtype=wp.int32, device=d), element=wp.full(m, -1, dtype=wp.int32, device=d),
+                  order=order[:n], tri_points=geometry.points, tri_indices=geometry.indices,
+                  level_offsets=offsets, device=dev)
+    for lv, (parent_local, first_local) in enumerate(links, start=1):
+        device_mod.launch(_place_kernel, sizes[lv - 1],
+                          [int(offsets[lv - 1]), int(offsets[lv]), parent_local, first_local, sizes[lv],
+                           h.parent, h.first_child, h.level, lv], dev)
+    for lv in range(1, len(sizes)):
+        device_mod.launch(_descend_kernel, sizes[lv], [int(offsets[lv]), int(offsets[lv + 1]), int(offsets[lv]),
+                                                       h.first_child, h.descend], dev)
+    for lv in range(len(sizes) - 2, -1, -1):
+        device_mod.launch(_next_kernel, sizes[lv], [int(offsets[lv]), int(offsets[lv + 1]), h.parent, h.next],
+                          dev)
     _aggregate(h, els.position, els.normal, els.area)
-    wp.copy(h.next, wp.array([-1], dtype=wp.int32, device=d), dest_offset=m - 1)
-    for lv in range(len(offsets) - 3, -1, -1):
-        size = int(offsets[lv + 1] - offsets[lv])
-        device_mod.launch(_next_kernel, size, [int(offsets[lv]), size, int(offsets[lv + 1]), h.next], dev)
     return h
 
 
@@ -216,32 +296,31 @@ def refit(h: Hierarchy, positions: np.ndarray, normals: np.ndarray, areas: np.nd
 def _aggregate(h: Hierarchy, positions, normals, areas) -> None:
     dev = h.device
     d = dev.name
-    n = int(h.level_offsets[1])
-    device_mod.launch(_leaf_kernel, n, [h.order, wp.array(np.ascontiguousarray(positions, np.float32), dtype=wp.vec3, device=d),
-                                        wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
-                                        wp.array(np.ascontiguousarray(areas, np.float32), dtype=wp.float32, device=d),
-                                        h.position, h.normal, h.spread, h.area, h.radius, h.element], dev)
     offs = h.level_offsets
+    device_mod.launch(_leaf_kernel, int(offs[1]),
+                      [h.order, wp.array(np.ascontiguousarray(positions, np.float32), dtype=wp.vec3, device=d),
+                       wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
+                       wp.array(np.ascontiguousarray(areas, np.float32), dtype=wp.float32, device=d),
+                       h.position, h.normal, h.spread, h.area, h.radius, h.leaves, h.element], dev)
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_merge_kernel, int(offs[lv + 1] - offs[lv]),
-                          [int(offs[lv - 1]), int(offs[lv]), int(offs[lv]), h.position, h.normal,
-                           h.spread, h.area, h.radius, h.first_child], dev)
+                          [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), h.position, h.normal,
+                           h.spread, h.area, h.radius, h.leaves, h.first_child], dev)
 
 
 @wp.kernel
-def _mean_kernel(offset: int, child0: int, child_end: int, node0: int, n_area: wp.array(dtype=wp.float32),
+def _mean_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
+                 first_child: wp.array(dtype=wp.int32), n_area: wp.array(dtype=wp.float32),
                  values: wp.array(dtype=wp.vec3)):
-    k = wp.tid() + offset
-    c0 = child0 + BRANCH * k
-    c1 = wp.min(c0 + BRANCH, child_end)
+    node = node0 + wp.tid() + offset
     total = float(0.0)
     acc = wp.vec3(0.0)
-    for c in range(c0, c1):
+    for c in range(first_child[node], _child_end(node, level_end, child_level_end, first_child)):
         total += n_area[c]
         acc += values[c] * n_area[c]
     if total > 0.0:
         acc = acc / total
-    values[node0 + k] = acc
+    values[node] = acc
 
 
 @wp.kernel
@@ -266,6 +345,5 @@ def node_means(h: Hierarchy, per_element: np.ndarray, out: wp.array | None = Non
                       dev)
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_mean_kernel, int(offs[lv + 1] - offs[lv]),
-                          [int(offs[lv - 1]), int(offs[lv]), int(offs[lv]), h.area, out], dev)
+                          [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), h.first_child, h.area, out], dev)
     return out
-

@@ -62,26 +62,30 @@ _levels = wp.types.vector(length=MAX_LEVELS, dtype=wp.float32)
 class Gather:
     """Per receiver: accessibility float32[N] in [0,1]; bent_normal float32[N,3] unit (the mean
     unoccluded direction); light float32[N,3] gathered lighting (irradiance/π from the senders'
-    radiance, overlaps resolved per cell), None when no radiance was given."""
+    radiance, overlaps resolved per cell), None when no radiance was given; visits: int32[N] tree
+    nodes each traversal visited (the work per receiver)."""
 
     accessibility: np.ndarray
     bent_normal: np.ndarray
     light: Optional[np.ndarray]
+    visits: np.ndarray
 
 
 @wp.func
-def cluster_ff(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float) -> float:
-    """Form factor of a cluster: its disk for aligned normals (spread 1), an isotropic blob of
-    projected area A/4 (a closed convex surface's mean) where they cancel (spread 0), linearly
-    between."""
+def cluster_ff(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float,
+               leaves: float) -> float:
+    """Form factor of a cluster of ``leaves`` disks: as many disks of its mean area at its centre
+    (their sum, not one disk of the whole area, whose π d² + A denominator would be too large) for
+    aligned normals (spread 1); an isotropic blob of projected area A/4 (a closed convex surface's
+    mean) where they cancel (spread 0); linearly between."""
     d = q - p
     d2 = wp.dot(d, d)
     if d2 <= 0.0:
         return 0.0
     cos_r = wp.max(wp.dot(n, d) / wp.sqrt(d2), 0.0)
-    quarter = 0.25 * area
-    iso = quarter * cos_r / (3.141592653589793 * d2 + quarter)
-    return spread * disk_ff(p, n, q, nq, area) + (1.0 - spread) * iso
+    each = area / leaves
+    iso = 0.25 * area * cos_r / (3.141592653589793 * d2 + 0.25 * each)
+    return spread * leaves * disk_ff(p, n, q, nq, each) + (1.0 - spread) * iso
 
 
 @wp.func
@@ -107,20 +111,22 @@ def cell_of(d: wp.vec3, tu: wp.vec3, tv: wp.vec3, n: wp.vec3):
 def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=wp.vec3),
                    n_pos: wp.array(dtype=wp.vec3), n_nrm: wp.array(dtype=wp.vec3),
                    n_spread: wp.array(dtype=wp.float32), n_area: wp.array(dtype=wp.float32),
-                   n_radius: wp.array(dtype=wp.float32), first_child: wp.array(dtype=wp.int32),
+                   n_radius: wp.array(dtype=wp.float32), n_leaves: wp.array(dtype=wp.float32),
+                   descend: wp.array(dtype=wp.int32),
                    next_node: wp.array(dtype=wp.int32), level: wp.array(dtype=wp.int32),
                    element: wp.array(dtype=wp.int32), root: int,
                    fan_offsets: wp.array(dtype=wp.int32), fan_triangles: wp.array(dtype=wp.int32),
                    tris: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3),
                    distance: float, open_k: float, with_light: int, radiance: wp.array(dtype=wp.vec3),
                    out_access: wp.array(dtype=wp.float32), out_bent: wp.array(dtype=wp.vec3),
-                   out_light: wp.array(dtype=wp.vec3)):
+                   out_light: wp.array(dtype=wp.vec3), out_visits: wp.array(dtype=wp.int32)):
     i = wp.tid() + offset
     p = rp[i]
     n = rn[i]
     tu, tv = tangent_frame(n)
     cover = _bins()
     back = _bins()
+    peak = _bins()  # the largest single far front contribution per cell
     red = _bins()
     green = _bins()
     blue = _bins()
@@ -132,7 +138,9 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     raw = float(0.0)
     dirsum = wp.vec3(0.0)
     node = root
+    visits = int(0)
     while node >= 0:
+        visits += 1
         sender = node
         q = n_pos[node]
         r = n_radius[node]
@@ -147,7 +155,7 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
         far_b = float(0.0)  # back faces, splatted
         exact = float(0.0)  # front faces, near field: never capped
         exact_b = float(0.0)
-        child = first_child[node]
+        child = descend[node]
         if child < 0:
             if dist < distance:
                 a = n_area[node]
@@ -168,12 +176,16 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                                                      points)
             node = next_node[node]
         else:
-            alpha = float(0.0)
-            if dist + r < distance:  # a node straddling the AO distance is always opened
-                alpha = wp.clamp((d2 / (open_k * r * r) - 0.9) * 5.0, 0.0, 1.0)
+            # Never nearer than a leaf would take its exact form factor: a chain of one-child
+            # cells over a single disk must reach that leaf's near field.
+            alpha = wp.clamp((d2 / wp.max(open_k * r * r, NEAR * n_area[node]) - 0.9) * 5.0, 0.0, 1.0)
             if alpha > 0.0:
-                far = w * alpha * cluster_ff(p, n, q, n_nrm[node], n_area[node], n_spread[node])
-                far_b = w * alpha * cluster_ff(p, n, q, -n_nrm[node], n_area[node], n_spread[node])
+                # A far node straddling the AO distance counts with the part of its depth inside
+                # (opening it down to the leaves would visit a whole shell of them per receiver).
+                part = w * alpha * wp.clamp((distance - dist + r) / (2.0 * r), 0.0, 1.0)
+                far = part * cluster_ff(p, n, q, n_nrm[node], n_area[node], n_spread[node], n_leaves[node])
+                far_b = part * cluster_ff(p, n, q, -n_nrm[node], n_area[node], n_spread[node],
+                                          n_leaves[node])
             if alpha < 1.0:
                 weights[level[child]] = w * (1.0 - alpha)
                 node = child
@@ -188,6 +200,10 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
             cover[c1] = cover[c1] + far * w1
             cover[c2] = cover[c2] + far * w2
             cover[c3] = cover[c3] + far * w3
+            peak[c0] = wp.max(peak[c0], far * w0)
+            peak[c1] = wp.max(peak[c1], far * w1)
+            peak[c2] = wp.max(peak[c2], far * w2)
+            peak[c3] = wp.max(peak[c3], far * w3)
             back[c0] = back[c0] + far_b * w0
             back[c1] = back[c1] + far_b * w1
             back[c2] = back[c2] + far_b * w2
@@ -218,15 +234,17 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     occ = float(0.0)
     light = near_light
     for b in range(BINS):
-        # Near-field parts count whole (the exact form factor of a close, wide sender can exceed a
-        # cell); whatever lies farther in the same cell fills only what they leave free.
+        # Near-field parts count whole, and so does the largest single far part (a wide sender
+        # can exceed a cell); stacked parts fill what they leave. Front and back faces of one
+        # closed object show the same directions: the larger of the two, not their sum.
         blocked = wp.max(near[b], near_back[b])
-        occ += wp.max(blocked, wp.min(wp.max(cover[b] + near[b], back[b] + near_back[b]), CELL))
+        occ += wp.max(wp.max(blocked, peak[b]), wp.min(wp.max(cover[b] + near[b], back[b] + near_back[b]), CELL))
         c = cover[b]
         if with_light != 0 and c > 0.0:
             # senders stacked in one cell share what is left of it: their mean radiance
-            light += wp.vec3(red[b], green[b], blue[b]) * wp.min(1.0, wp.max(CELL - blocked, 0.0) / c)
+            light += wp.vec3(red[b], green[b], blue[b]) * wp.min(1.0, wp.max(CELL - blocked, peak[b]) / c)
     out_access[i] = wp.clamp(1.0 - occ, 0.0, 1.0)
+    out_visits[i] = visits
     if with_light != 0:
         out_light[i] = light
     bent = n
@@ -255,18 +273,19 @@ def gather(hier: Hierarchy, els: Elements, points: np.ndarray, normals: np.ndarr
     bent = wp.empty(count, dtype=wp.vec3, device=d)
     with_light = radiance is not None
     light = wp.empty(count if with_light else 1, dtype=wp.vec3, device=d)
+    visits = wp.empty(count, dtype=wp.int32, device=d)
     if not with_light:
         radiance = light  # not read
     device_mod.launch(
         _gather_kernel, count,
         [wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
-         hier.position, hier.normal, hier.spread, hier.area, hier.radius, hier.first_child, hier.next,
+         hier.position, hier.normal, hier.spread, hier.area, hier.radius, hier.leaves, hier.descend, hier.next,
          hier.level, hier.element, hier.root, wp.array(els.fan_offsets, dtype=wp.int32, device=d),
          wp.array(els.fan_triangles, dtype=wp.int32, device=d), hier.tri_indices, hier.tri_points, float(distance), float(open_k), int(with_light), radiance,
-         access, bent, light],
+         access, bent, light, visits],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
-    return Gather(access.numpy(), bent.numpy(), light.numpy() if with_light else None)
+    return Gather(access.numpy(), bent.numpy(), light.numpy() if with_light else None, visits.numpy())
 
 
 def ao_distance(settings) -> float:

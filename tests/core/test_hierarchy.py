@@ -42,16 +42,27 @@ def _tree(scene, dev):
     return els, geometry, hierarchy.build(els, dev, geometry)
 
 
-def _leaf_ranges(h):
-    """Per node, the range of leaf slots [lo, hi) below it (the tree is complete per level)."""
+def _children(h):
+    """Per node, its child range [first, end) (empty for leaves)."""
+    first = h.first_child.numpy()
+    end = np.full(h.count, -1)
     offs = h.level_offsets
-    n = int(offs[1])
-    lo, hi = [], []
-    for lv in range(h.levels):
-        k = np.arange(offs[lv + 1] - offs[lv])
-        lo.append(np.minimum(k * hierarchy.BRANCH ** lv, n))
-        hi.append(np.minimum((k + 1) * hierarchy.BRANCH ** lv, n))
-    return np.concatenate(lo), np.concatenate(hi)
+    for lv in range(1, h.levels):
+        g = np.arange(offs[lv], offs[lv + 1])
+        end[g] = np.append(first[g[1:]], offs[lv])
+    return first, end
+
+
+def _leaf_ranges(h):
+    """Per node, the range of leaf slots [lo, hi) below it."""
+    first, end = _children(h)
+    offs = h.level_offsets
+    lo = np.arange(h.count)
+    hi = lo + 1
+    for lv in range(1, h.levels):
+        g = np.arange(offs[lv], offs[lv + 1])
+        lo[g], hi[g] = lo[first[g]], hi[end[g] - 1]
+    return lo, hi
 
 
 def test_every_element_is_one_leaf_and_the_root_holds_all_area(dev):
@@ -62,7 +73,12 @@ def test_every_element_is_one_leaf_and_the_root_holds_all_area(dev):
     assert (h.element.numpy()[n:] == -1).all()
     assert (h.first_child.numpy()[:n] == -1).all() and (h.first_child.numpy()[n:] >= 0).all()
     np.testing.assert_allclose(h.area.numpy()[h.root], els.area.sum(), rtol=1e-5)
-    assert h.levels == 1 + int(np.ceil(np.log(n) / np.log(hierarchy.BRANCH)))
+    assert h.levels <= hierarchy.MAX_LEVELS
+    first, end = _children(h)
+    above = np.arange(h.level_offsets[2], h.count)  # octree cells: 1 to 8 children each
+    assert ((end[above] - first[above] >= 1) & (end[above] - first[above] <= 8)).all()
+    lo, hi = _leaf_ranges(h)
+    assert lo[h.root] == 0 and hi[h.root] == n
 
 
 def test_nodes_bound_and_summarise_their_subtrees(dev):
