@@ -1,4 +1,6 @@
 """Lightmaps through the add-on: files, UV maps, images, hook-up, clearing, failures, the CLI."""
+import json
+
 import bpy
 import numpy as np
 import pytest
@@ -168,8 +170,12 @@ def test_cli_target_lightmap_writes_files_next_to_the_blend_and_packs(empty_scen
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     assert cli.main(["bake", str(blend), "--method", "direct", "--samples", "1", "--target",
                      "lightmap", "--texel-density", "8", "--max-size", "64", "--padding", "2",
-                     "--pack-images", "--hookup", "--save", str(out)]) == 0
-    assert (tmp_path / "lightmaps" / "Lightmap.exr").is_file()
+                     "--pack-images", "--hookup", "--save", str(out), "--report",
+                     str(tmp_path / "report.json")]) == 0
+    exr = tmp_path / "lightmaps" / "Lightmap.exr"
+    assert exr.is_file()
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["lightmaps"] == {"Lightmap": str(exr)} and report["counts"]["texels"] > 0
     bpy.ops.wm.open_mainfile(filepath=str(out))
     image = bpy.data.images["Lightmap"]
     assert image.packed_file is not None and max(image.size) <= 64
