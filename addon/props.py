@@ -99,6 +99,7 @@ class RadiosityBakeSettings(bpy.types.PropertyGroup):
     layout: EnumProperty(name="Layout", items=_items(core_settings.LAYOUTS),
                          default=_DEFAULTS.layout, description="How lightmaps are shared")
     output: StringProperty(name="Output", default=_DEFAULTS.output, subtype='DIR_PATH',
+                           options={'PATH_SUPPORTS_BLEND_RELATIVE'},
                            description="Folder the EXR lightmaps and PNG previews are written to "
                                        "('//' is the .blend's folder)")
     hookup: EnumProperty(name="Hook Up", items=_items(core_settings.HOOKUPS),
