@@ -12,20 +12,22 @@ import contextlib
 import bpy
 import numpy as np
 
+from .temporary import temporarily
+
 BAKE_TYPES = ("DIFFUSE", "AO")
 
 
-@contextlib.contextmanager
-def _patched(*assignments):
-    """Set ``(owner, attribute, value)`` assignments for the duration of the block, then restore."""
-    saved = [(owner, name, getattr(owner, name)) for owner, name, _ in assignments]
-    try:
-        for owner, name, value in assignments:
-            setattr(owner, name, value)
-        yield
-    finally:
-        for owner, name, value in reversed(saved):
-            setattr(owner, name, value)
+def _path_tracing(scene, samples: int, bounces: int, seed: int, target: str):
+    """Render settings of a reference bake: Cycles on the CPU, no denoising, clamping or adaptive
+    sampling, ``bounces`` as the maximum and diffuse bounce count; (owner, name, value) triples."""
+    cycles = scene.cycles
+    return (
+        (scene.render, "engine", "CYCLES"), (cycles, "device", "CPU"), (cycles, "samples", samples),
+        (cycles, "use_denoising", False), (cycles, "sample_clamp_direct", 0.0),
+        (cycles, "sample_clamp_indirect", 0.0), (cycles, "max_bounces", bounces),
+        (cycles, "diffuse_bounces", bounces), (cycles, "seed", seed),
+        (cycles, "use_adaptive_sampling", False), (scene.render.bake, "target", target),
+    )
 
 
 @contextlib.contextmanager
@@ -83,16 +85,9 @@ def cycles_bake_vertex_colors(object_names, *, passes=("DIRECT", "INDIRECT"), ba
         raise ValueError(f"bake_type must be one of {', '.join(BAKE_TYPES)}, not {bake_type!r}")
     scene = scene or bpy.context.scene
     view_layer = bpy.context.view_layer
-    cycles = scene.cycles
-    settings = (
-        (scene.render, "engine", "CYCLES"), (cycles, "device", "CPU"), (cycles, "samples", samples),
-        (cycles, "use_denoising", False), (cycles, "sample_clamp_direct", 0.0),
-        (cycles, "sample_clamp_indirect", 0.0), (cycles, "max_bounces", bounces),
-        (cycles, "diffuse_bounces", bounces), (cycles, "seed", seed),
-        (cycles, "use_adaptive_sampling", False), (scene.render.bake, "target", "VERTEX_COLORS"),
-    )
+    settings = _path_tracing(scene, samples, bounces, seed, "VERTEX_COLORS")
     results = {}
-    with _patched(*settings):
+    with temporarily(settings):
         for name in object_names:
             ob = scene.objects[name]
             if ob.type != "MESH":
@@ -127,15 +122,8 @@ def cycles_bake_image(object_names, uv_map: str, width: int, height: int, *,
     materials = {s.material for ob in objects for s in ob.material_slots if s.material is not None}
     added, active_nodes = [], {}
     active_uv = {ob.data: ob.data.uv_layers.active.name for ob in objects}
-    cycles = scene.cycles
-    settings = (
-        (scene.render, "engine", "CYCLES"), (cycles, "device", "CPU"), (cycles, "samples", samples),
-        (cycles, "use_denoising", False), (cycles, "sample_clamp_direct", 0.0),
-        (cycles, "sample_clamp_indirect", 0.0), (cycles, "max_bounces", bounces),
-        (cycles, "diffuse_bounces", bounces), (cycles, "seed", seed),
-        (cycles, "use_adaptive_sampling", False), (scene.render.bake, "target", "IMAGE_TEXTURES"),
-        (scene.render.bake, "margin", 0), (scene.render.bake, "use_clear", False),
-    )
+    settings = (*_path_tracing(scene, samples, bounces, seed, "IMAGE_TEXTURES"),
+                (scene.render.bake, "margin", 0), (scene.render.bake, "use_clear", False))
     selected = [o for o in view_layer.objects if o.select_get()]
     active = view_layer.objects.active
     try:
@@ -148,7 +136,7 @@ def cycles_bake_image(object_names, uv_map: str, width: int, height: int, *,
             added.append((mat, node))
         for ob in objects:
             ob.data.uv_layers.active = ob.data.uv_layers[uv_map]
-        with _patched(*settings):
+        with temporarily(settings):
             for o in selected:
                 o.select_set(False)
             for ob in objects:

@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import math
-from contextlib import contextmanager
 from pathlib import Path
 
 import bpy
 import numpy as np
 from mathutils import Vector
+
+from .temporary import temporarily
 
 _NAME = "radiosity_baker_preview"
 
@@ -46,7 +47,7 @@ def render_preview(scene, attribute_name: str, path, size: int = 512, samples: i
         (scene.view_settings, "use_curve_mapping", False),
     ]
     try:
-        with _temporarily(overrides), bpy.context.temp_override(scene=scene):
+        with temporarily(overrides), bpy.context.temp_override(scene=scene):
             bpy.ops.render.render()
             result = next(im for im in bpy.data.images if im.type == 'RENDER_RESULT')
             result.save_render(filepath=str(Path(path)), scene=scene)
@@ -71,19 +72,6 @@ def _exposure(scene, attribute_name: str) -> float:
         return 0.0
     high = float(np.percentile(np.concatenate(values), 95))
     return -float(math.ceil(math.log2(high))) if high > 1.0 else 0.0
-
-
-@contextmanager
-def _temporarily(overrides):
-    """Set (owner, attribute, value) triples; put the old values back on exit."""
-    saved = [(owner, name, getattr(owner, name)) for owner, name, _ in overrides]
-    try:
-        for owner, name, value in overrides:
-            setattr(owner, name, value)
-        yield
-    finally:
-        for owner, name, value in reversed(saved):
-            setattr(owner, name, value)
 
 
 def _emission_material(attribute_name: str):
