@@ -11,9 +11,9 @@ area-weighted mean normal (unit) with its length kept as ``spread`` (1: all norm
 they cancel), summed area and a bounding radius of the subtree's disks.
 
 Nodes are stored in one array, level by level, leaves first and the root last; a node's children
-are consecutive. Traversal is stackless: ``descend`` goes down (skipping one-child cells), ``next`` is where to go when a
-subtree is done (the next sibling, else the parent's ``next``; −1 after the last node), so one
-``while`` loop per receiver visits a cut of the tree in depth-first order.
+are consecutive. Traversal is stackless: ``descend`` goes down (past one-child cells), ``next`` is
+where to go when a subtree is done (the next sibling, else the parent's ``next``; −1 after the
+last node), so one ``while`` loop per receiver visits a cut of the tree in depth-first order.
 """
 from __future__ import annotations
 
@@ -253,31 +253,40 @@ def build(els: Elements, dev: device_mod.Device, geometry) -> Hierarchy:
         parent_keys = wp.empty(count, dtype=wp.int32, device=d)
         parent_local = wp.empty(size, dtype=wp.int32, device=d)
         first_local = wp.empty(count, dtype=wp.int32, device=d)
-        device_mod.launch(_link_kernel, size, [level_keys, run, parent_keys, parent_local, first_local], dev)
+        device_mod.launch(_link_kernel, size, [level_keys, run, parent_keys, parent_local, first_local],
+                          dev)
         links.append((parent_local, first_local))
         sizes.append(count)
         level_keys = parent_keys
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     m = int(offsets[-1])
 
-    h = Hierarchy(position=wp.empty(m, dtype=wp.vec3, device=d), normal=wp.empty(m, dtype=wp.vec3, device=d),
-                  spread=wp.empty(m, dtype=wp.float32, device=d), area=wp.empty(m, dtype=wp.float32, device=d),
-                  radius=wp.empty(m, dtype=wp.float32, device=d), leaves=wp.empty(m, dtype=wp.float32, device=d),
-                  first_child=wp.full(m, -1, dtype=wp.int32, device=d),
-                  descend=wp.full(m, -1, dtype=wp.int32, device=d),
-                  parent=wp.full(m, -1, dtype=wp.int32, device=d), next=wp.full(m, -1, dtype=wp.int32, device=d),
-                  level=wp.zeros(m, dtype=wp.int32, device=d), element=wp.full(m, -1, dtype=wp.int32, device=d),
-                  order=order[:n], tri_points=geometry.points, tri_indices=geometry.indices,
-                  level_offsets=offsets, device=dev)
+    def vec3s():
+        return wp.empty(m, dtype=wp.vec3, device=d)
+
+    def floats():
+        return wp.empty(m, dtype=wp.float32, device=d)
+
+    def indices(fill):
+        return wp.full(m, fill, dtype=wp.int32, device=d)
+
+    h = Hierarchy(position=vec3s(), normal=vec3s(), spread=floats(), area=floats(), radius=floats(),
+                  leaves=floats(), first_child=indices(-1), descend=indices(-1), parent=indices(-1),
+                  next=indices(-1), level=indices(0), element=indices(-1), order=order[:n],
+                  tri_points=geometry.points, tri_indices=geometry.indices, level_offsets=offsets,
+                  device=dev)
     for lv, (parent_local, first_local) in enumerate(links, start=1):
         device_mod.launch(_place_kernel, sizes[lv - 1],
                           [int(offsets[lv - 1]), int(offsets[lv]), parent_local, first_local, sizes[lv],
                            h.parent, h.first_child, h.level, lv], dev)
     for lv in range(1, len(sizes)):
-        device_mod.launch(_descend_kernel, sizes[lv], [int(offsets[lv]), int(offsets[lv + 1]), int(offsets[lv]),
-                                                       h.first_child, h.descend], dev)
+        device_mod.launch(_descend_kernel, sizes[lv],
+                          [int(offsets[lv]), int(offsets[lv + 1]), int(offsets[lv]), h.first_child,
+                           h.descend],
+                          dev)
     for lv in range(len(sizes) - 2, -1, -1):
-        device_mod.launch(_next_kernel, sizes[lv], [int(offsets[lv]), int(offsets[lv + 1]), h.parent, h.next],
+        device_mod.launch(_next_kernel, sizes[lv],
+                          [int(offsets[lv]), int(offsets[lv + 1]), h.parent, h.next],
                           dev)
     _aggregate(h, els.position, els.normal, els.area)
     return h
@@ -298,7 +307,8 @@ def _aggregate(h: Hierarchy, positions, normals, areas) -> None:
     d = dev.name
     offs = h.level_offsets
     device_mod.launch(_leaf_kernel, int(offs[1]),
-                      [h.order, wp.array(np.ascontiguousarray(positions, np.float32), dtype=wp.vec3, device=d),
+                      [h.order,
+                       wp.array(np.ascontiguousarray(positions, np.float32), dtype=wp.vec3, device=d),
                        wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
                        wp.array(np.ascontiguousarray(areas, np.float32), dtype=wp.float32, device=d),
                        h.position, h.normal, h.spread, h.area, h.radius, h.leaves, h.element], dev)
@@ -341,8 +351,9 @@ def node_means(h: Hierarchy, per_element: np.ndarray, out: wp.array | None = Non
         out = wp.empty(h.count, dtype=wp.vec3, device=d)
     offs = h.level_offsets
     device_mod.launch(_scatter_kernel, int(offs[1]),
-                      [h.element, wp.array(np.ascontiguousarray(per_element, np.float32), dtype=wp.vec3, device=d), out],
-                      dev)
+                      [h.element,
+                       wp.array(np.ascontiguousarray(per_element, np.float32), dtype=wp.vec3, device=d),
+                       out], dev)
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_mean_kernel, int(offs[lv + 1] - offs[lv]),
                           [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), h.first_child, h.area, out], dev)

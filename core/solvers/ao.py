@@ -183,7 +183,8 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                 # A far node straddling the AO distance counts with the part of its depth inside
                 # (opening it down to the leaves would visit a whole shell of them per receiver).
                 part = w * alpha * wp.clamp((distance - dist + r) / (2.0 * r), 0.0, 1.0)
-                far = part * cluster_ff(p, n, q, n_nrm[node], n_area[node], n_spread[node], n_leaves[node])
+                far = part * cluster_ff(p, n, q, n_nrm[node], n_area[node], n_spread[node],
+                                        n_leaves[node])
                 far_b = part * cluster_ff(p, n, q, -n_nrm[node], n_area[node], n_spread[node],
                                           n_leaves[node])
             if alpha < 1.0:
@@ -238,7 +239,8 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
         # can exceed a cell); stacked parts fill what they leave. Front and back faces of one
         # closed object show the same directions: the larger of the two, not their sum.
         blocked = wp.max(near[b], near_back[b])
-        occ += wp.max(wp.max(blocked, peak[b]), wp.min(wp.max(cover[b] + near[b], back[b] + near_back[b]), CELL))
+        fill = wp.max(cover[b] + near[b], back[b] + near_back[b])
+        occ += wp.max(wp.max(blocked, peak[b]), wp.min(fill, CELL))
         c = cover[b]
         if with_light != 0 and c > 0.0:
             # senders stacked in one cell share what is left of it: their mean radiance
@@ -280,10 +282,11 @@ def gather(hier: Hierarchy, els: Elements, points: np.ndarray, normals: np.ndarr
         _gather_kernel, count,
         [wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
-         hier.position, hier.normal, hier.spread, hier.area, hier.radius, hier.leaves, hier.descend, hier.next,
-         hier.level, hier.element, hier.root, wp.array(els.fan_offsets, dtype=wp.int32, device=d),
-         wp.array(els.fan_triangles, dtype=wp.int32, device=d), hier.tri_indices, hier.tri_points, float(distance), float(open_k), int(with_light), radiance,
-         access, bent, light, visits],
+         hier.position, hier.normal, hier.spread, hier.area, hier.radius, hier.leaves, hier.descend,
+         hier.next, hier.level, hier.element, hier.root,
+         wp.array(els.fan_offsets, dtype=wp.int32, device=d),
+         wp.array(els.fan_triangles, dtype=wp.int32, device=d), hier.tri_indices, hier.tri_points,
+         float(distance), float(open_k), int(with_light), radiance, access, bent, light, visits],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
     return Gather(access.numpy(), bent.numpy(), light.numpy() if with_light else None, visits.numpy())
 
@@ -297,6 +300,6 @@ def accessibility(hier: Hierarchy, els: Elements, points: np.ndarray, normals: n
                   dev: device_mod.Device, progress=None) -> np.ndarray:
     """float32[N] accessibility in [0,1] (1: open sky) at receivers ``points`` float32[N,3] (m) with
     unit ``normals`` float32[N,3]: the cosine-weighted fraction of the hemisphere not covered by
-    the front faces of ``els`` within the AO distance (what Cycles' AO bake gives). ``hier`` is
+    the surfaces of ``els`` within the AO distance (what Cycles' AO bake gives). ``hier`` is
     the tree over ``els``; progress(fraction) is called between launches."""
     return gather(hier, els, points, normals, ao_distance(settings), dev, progress=progress).accessibility

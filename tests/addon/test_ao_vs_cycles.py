@@ -59,7 +59,8 @@ def test_ao_matches_cycles_ao_bake_on_the_sample_scenes(blend, distance):
         mae, bias = float(err.mean()), float((ours - reference).mean())
         print(f"\n{blend}: AO mean abs error {mae:.4f}, mean bias {bias:+.4f}, p95 "
               f"{np.percentile(err, 95):.4f}, Cycles mean {reference.mean():.3f}, distance {distance:g} m")
-        _record(f"{blend} distance {distance:g} m", {"mean_abs_error": round(mae, 5), "mean_bias": round(bias, 5),
+        _record(f"{blend} distance {distance:g} m", {"mean_abs_error": round(mae, 5),
+                                                      "mean_bias": round(bias, 5),
                         "p95_abs_error": round(float(np.percentile(err, 95)), 5),
                         "cycles_mean": round(float(reference.mean()), 5), "ao_distance": round(distance, 4),
                         "cycles_samples": CYCLES_SAMPLES, "vertices": int(len(reference)),

@@ -10,12 +10,14 @@ from radiosity_baker.core.scene import LAMP_POINT
 from radiosity_baker.core.solvers import bunnell
 
 # Measured on room() below against the reference with bounces=1: lighting (direct + indirect)
-# relative RMSE 0.013, mean bias +0.003; the indirect part alone 0.104 and +0.026. The gap is the
-# cell-level shadowing (ao.py: occluders resolved per 1/32 of the hemisphere, not per ray) and
-# the disk approximation; tolerances are about twice the measured values.
-RMSE_TOLERANCE = 0.03
+# relative RMSE 0.026, mean bias −0.004; the indirect part alone 0.21 and −0.038. The gap is the
+# cell-level shadowing (ao.py: occluders resolved per 1/32 of the hemisphere, not per ray), the
+# disk approximation and the senders' local accessibility (bunnell.LOCAL), which darkens the
+# floor–wall corner and the ball's contact a little here (without it: 0.014 and 0.11) while it
+# removes the Cornell box's hidden hot spot. Tolerances are about 1.5× the measured values.
+RMSE_TOLERANCE = 0.04
 BIAS_TOLERANCE = 0.01
-INDIRECT_RMSE_TOLERANCE = 0.2
+INDIRECT_RMSE_TOLERANCE = 0.3
 INDIRECT_BIAS_TOLERANCE = 0.06
 
 
