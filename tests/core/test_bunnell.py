@@ -7,7 +7,7 @@ import shapes
 from radiosity_baker.core import Settings, bake, direct, elements, metrics
 from radiosity_baker.core import device as device_mod
 from radiosity_baker.core.scene import LAMP_POINT
-from radiosity_baker.core.solvers import bunnell
+from radiosity_baker.core.solvers import bunnell, reference
 
 # Measured on room() below against the reference with bounces=1: lighting (direct + indirect)
 # relative RMSE 0.026, mean bias −0.004; the indirect part alone 0.21 and −0.038. The gap is the
@@ -80,3 +80,36 @@ def test_pipeline_times_the_hierarchy_and_counts_its_nodes():
     assert result.timings["hierarchy"] > 0.0 and "solve" in result.timings
     assert result.counts["nodes"] > result.counts["elements"]
     assert result.counts["iterations"] == 1
+
+
+def _hot_ceiling(with_panel: bool):
+    """A floor, a ceiling 1 m above it whose middle is lit hard (direct 100 on a 0.4 m patch), and
+    optionally a black panel 5 mm under that patch (like the Cornell box's light)."""
+    floor = shapes.grid(2.0, 10)
+    ceiling = shapes.grid(2.0, 20, z=1.0, flip=True)
+    parts = [(*floor, (0.5,) * 3, (0,) * 3), (*ceiling, (0.5,) * 3, (0,) * 3)]
+    if with_panel:
+        parts.append((*shapes.grid(0.5, 5, z=0.995, flip=True), (0.0,) * 3, (0,) * 3))
+    sc = shapes.scene(parts)
+    els = elements.build(sc)
+    hot = (np.abs(els.position[:, 2] - 1.0) < 1e-4) & (np.abs(els.position[:, :2]).max(axis=1) < 0.2)
+    d = np.where(hot[:, None], 100.0, 0.0).astype(np.float32) * np.ones((1, 3), np.float32)
+    return sc, els, d
+
+
+def test_a_surface_closed_in_behind_a_close_panel_sends_nothing(dev):
+    """The hot patch above the panel is hidden from the floor (reference: rays), though the panel
+    fills too little of the floor's hemisphere to hide it cell by cell."""
+    floor_light = {}
+    for with_panel in (False, True):
+        sc, els, d = _hot_ceiling(with_panel)
+        geometry = direct.SceneGeometry(sc, dev)
+        floor = np.abs(els.position[:, 2]) < 1e-4
+        s = Settings(method="bunnell", bounces=1)
+        ours = bunnell.solve(geometry, els, d, s, dev).indirect[floor].mean()
+        ref = reference.solve(geometry, els, d, s, dev).indirect[floor].mean()
+        floor_light[with_panel] = (ours, ref)
+    (open_ours, open_ref), (hidden_ours, hidden_ref) = floor_light[False], floor_light[True]
+    assert open_ours == pytest.approx(open_ref, rel=0.1)
+    assert hidden_ref < 0.1 * open_ref
+    assert hidden_ours < 0.1 * open_ours
