@@ -3,7 +3,7 @@ hierarchy rebuild and refit of a deforming mesh; Bunnell indirect light against 
 
 Scene: a 10 m hilly terrain (a height field of k×k quads, hills 0.6 m high, 1.5 m apart) with
 the default 10 m AO distance, so every receiver sees occluders at all scales. Times are wall
-seconds of ``ao.accessibility`` at every vertex (hierarchy built beforehand, kernels compiled by
+seconds of the AO gather (``ao.gather``, what ``ao.accessibility`` runs) at every vertex (hierarchy built beforehand, kernels compiled by
 a warm-up run), the median of ``--repeat`` runs (other work on a shared machine shows as noise). The all-pairs sum (the same kernel opening every
 node) runs while its predicted time stays under ``--pairs-limit`` seconds.
 
@@ -64,7 +64,6 @@ def _median_time(fn, repeat: int) -> float:
 
 
 def scaling(sizes, dev, repeat: int, pairs_limit: float) -> list:
-    settings = Settings(content="ao", ao_distance=10.0)
     rows = []
     pair_rate = None  # pairs per second of the all-pairs sum, from the last run
     for size in sizes:
@@ -73,16 +72,21 @@ def scaling(sizes, dev, repeat: int, pairs_limit: float) -> list:
         geometry = direct.SceneGeometry(sc, dev)
         h = hierarchy.build(els, dev, geometry)
         n = els.count
-        run = lambda: ao.accessibility(h, els, els.position, els.normal, settings, dev)  # noqa: E731
+        last = {}
+
+        def run():
+            last["gather"] = ao.gather(h, els, els.position, els.normal, 10.0, dev)
+
         tree = _median_time(run, repeat)
         row = {"vertices": n, "nodes": h.count, "levels": h.levels, "tree_seconds": round(tree, 4),
-               "tree_receivers_per_second": round(n / tree)}
+               "tree_receivers_per_second": round(n / tree),
+               "visits_per_receiver": round(float(last["gather"].visits.mean()), 1)}
         if pair_rate is None or n * n / pair_rate <= pairs_limit:
             t0 = time.perf_counter()
             brute = ao.gather(h, els, els.position, els.normal, 10.0, dev, open_k=ao.ALL_PAIRS).accessibility
             pairs = time.perf_counter() - t0
             pair_rate = n * n / pairs
-            access = run()
+            access = last["gather"].accessibility
             row.update(all_pairs_seconds=round(pairs, 4),
                        tree_vs_all_pairs_mean_abs=round(float(np.abs(access - brute).mean()), 5),
                        tree_vs_all_pairs_max_abs=round(float(np.abs(access - brute).max()), 5))
