@@ -3,9 +3,10 @@ hierarchy rebuild and refit of a deforming mesh; Bunnell indirect light against 
 
 Scene: a 10 m hilly terrain (a height field of k×k quads, hills 0.6 m high, 1.5 m apart) with
 the default 10 m AO distance, so every receiver sees occluders at all scales. Times are wall
-seconds of the AO gather (``ao.gather``, what ``ao.accessibility`` runs) at every vertex (hierarchy built beforehand, kernels compiled by
-a warm-up run), the median of ``--repeat`` runs (other work on a shared machine shows as noise). The all-pairs sum (the same kernel opening every
-node) runs while its predicted time stays under ``--pairs-limit`` seconds.
+seconds of the AO gather (``ao.gather``, what ``ao.accessibility`` runs) at every vertex, the
+hierarchy built beforehand and the kernels compiled by a warm-up run; the median of ``--repeat``
+runs (other work on a shared machine shows as noise). The all-pairs sum (the same kernel
+opening every node) runs while its predicted time stays under ``--pairs-limit`` seconds.
 
 ``--samples`` also compares Bunnell's one-bounce indirect light with the reference solver on the
 sample scenes (needs the bpy module). Writes bench/results/ao-<hostname>.json.
