@@ -112,6 +112,11 @@ def _parser() -> argparse.ArgumentParser:
     lightmap.add_argument("--supersample", metavar="N", type=_positive_int,
                           default=defaults.supersample,
                           help="lighting samples per texel along each axis (default: %(default)s)")
+    lightmap.add_argument("--texel-indirect", choices=core_settings.TEXEL_INDIRECT,
+                          default=defaults.texel_indirect,
+                          help="indirect light per texel: the per-vertex solution interpolated, or "
+                               "that plus the detail of a final gather over the element hierarchy "
+                               "(default: %(default)s)")
     lightmap.add_argument("--lightmap-format", choices=core_settings.LIGHTMAP_FORMATS,
                           default=defaults.lightmap_format,
                           help="EXR channel precision (default: %(default)s)")

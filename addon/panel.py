@@ -41,7 +41,7 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col = layout.column(heading="Lightmap")
         col.active = s.target != "vertex_colors"
         for name in ("texel_density", "max_size", "padding", "layout", "output", "hookup",
-                     "reunwrap", "supersample", "lightmap_format", "pack_images"):
+                     "reunwrap", "supersample", "texel_indirect", "lightmap_format", "pack_images"):
             col.prop(s, name)
         row = layout.row()
         row.scale_y = 1.5

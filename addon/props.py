@@ -109,6 +109,11 @@ class RadiosityBakeSettings(bpy.types.PropertyGroup):
                            description="Make new 'Lightmap' UVs even where a mesh already has them")
     supersample: IntProperty(name="Supersample", default=_DEFAULTS.supersample, min=1, max=8,
                              description="Lighting samples per texel along each axis")
+    texel_indirect: EnumProperty(name="Texel Indirect", items=_items(core_settings.TEXEL_INDIRECT),
+                                 default=_DEFAULTS.texel_indirect,
+                                 description="Indirect light per texel: the per-vertex solution "
+                                             "interpolated, or that plus the detail of a final "
+                                             "gather over the element hierarchy at each texel")
     lightmap_format: EnumProperty(name="EXR Format", items=_items(core_settings.LIGHTMAP_FORMATS),
                                   default=_DEFAULTS.lightmap_format,
                                   description="Precision of the EXR channels")

@@ -35,3 +35,16 @@ def summary(ours: np.ndarray, reference: np.ndarray) -> dict:
     return {"relative_rmse": round(relative_rmse(ours, reference), 5),
             "mean_bias": round(mean_bias(ours, reference), 5),
             "p95": round(p95_error(ours, reference), 5)}
+
+
+def scalar_summary(ours: np.ndarray, reference: np.ndarray) -> dict:
+    """{mean_abs_error, mean_bias, p95_abs_error} of a scalar quantity (AO: the first channel of
+    float[N,3] or float[N]), in its own units, rounded to 5 digits: absolute, not relative, since AO
+    is a fraction in [0,1] whose mean says nothing about its scale."""
+    a = np.asarray(ours, np.float64).reshape(len(ours), -1)[:, 0]
+    b = np.asarray(reference, np.float64).reshape(len(reference), -1)[:, 0]
+    if a.shape != b.shape:
+        raise ValueError(f"shapes differ: {a.shape} vs {b.shape}")
+    err = np.abs(a - b)
+    return {"mean_abs_error": round(float(err.mean()), 5), "mean_bias": round(float((a - b).mean()), 5),
+            "p95_abs_error": round(float(np.percentile(err, 95)), 5)}

@@ -75,7 +75,8 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     Raises BakeError (clear message) for input that cannot be baked.
     lightmap: a ``core.lightmap.LightmapRequest``: its objects are also unwrapped, rasterised and
     lit per texel (direct light with shadow rays per texel, indirect interpolated from the
-    solution) into ``BakeResult.lightmap``.
+    solution, with the detail of a final gather over the hierarchy when ``texel_indirect`` is
+    ``gather``) into ``BakeResult.lightmap``.
     """
     from . import device as device_mod
     from . import direct, elements, hierarchy
@@ -114,8 +115,11 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     counts = {"objects": len(scene.object_names), "triangles": scene.num_triangles,
               "vertices": scene.num_vertices, "elements": els.count, "lamps": len(scene.lamps),
               "emissive_triangles": int(geometry.num_emitters), "rays": int(direct_rays)}
+    # The lightmap's final gather needs the tree too (and light to gather: not for AO or direct).
+    texel_gather = (lightmap is not None and settings.texel_indirect == "gather"
+                    and settings.content != "ao" and settings.solver != "direct")
     hier = None
-    if settings.content == "ao" or settings.solver == "bunnell":
+    if settings.content == "ao" or settings.solver == "bunnell" or texel_gather:
         hier = stages.run("hierarchy", hierarchy.build, els, dev, geometry)
         counts["nodes"] = hier.count
 
@@ -142,8 +146,13 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
                                 dev, lambda f: stages.report("texel ao", f))
             return {"ao": np.repeat(access[:, None], 3, axis=1)}
 
-        lightmap_result = bake_lightmaps(lightmap, scene, geometry, {"indirect": indirect}, settings,
-                                         dev, stages, texel_ao if settings.content == "ao" else None)
+        per_vertex, gather = {"indirect": indirect}, None
+        if texel_gather:
+            gather = stages.run("final gather", bunnell.final_gather, hier, els, lit_direct + indirect,
+                                geometry, dev)
+            per_vertex["gathered"] = stages.run("final gather", gather, els.position, els.normal)
+        lightmap_result = bake_lightmaps(lightmap, scene, geometry, per_vertex, settings, dev, stages,
+                                         texel_ao if settings.content == "ao" else None, gather)
         warnings += lightmap_result.warnings
         counts["texels"] = lightmap_result.texels
 

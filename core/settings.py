@@ -11,6 +11,7 @@ TARGETS = ("vertex_colors", "lightmap", "both")
 LAYOUTS = ("atlas", "per_object")
 HOOKUPS = ("none", "node", "multiply")
 LIGHTMAP_FORMATS = ("half", "float")
+TEXEL_INDIRECT = ("gather", "interpolate")
 DEVICES = ("auto", "cpu", "cuda")
 
 
@@ -50,6 +51,10 @@ class Settings:
         ``multiply`` also multiplies the lightmap into the Base Color.
     reunwrap: make new ``Lightmap`` UVs even where a mesh has them (else they are reused).
     supersample: texel sub-samples per axis (1: texel centres only).
+    texel_indirect: how a texel gets its indirect light: ``interpolate`` the per-vertex solution
+        over its triangle, or ``gather`` (that, plus the detail a final gather of the solution over
+        the disk hierarchy finds at the texel and not at the triangle's vertices: contact shadows
+        and bleeding finer than the mesh).
     lightmap_format: EXR channel precision, ``half`` or ``float``.
     pack_images: pack the lightmap images into the .blend.
     """
@@ -75,6 +80,7 @@ class Settings:
     hookup: str = "none"
     reunwrap: bool = False
     supersample: int = 1
+    texel_indirect: str = "gather"
     lightmap_format: str = "half"
     pack_images: bool = False
 
@@ -82,7 +88,7 @@ class Settings:
         """Raise ValueError with a clear message for an out-of-range setting; return self."""
         for name, allowed in (("method", METHODS + tuple(METHOD_ALIASES)), ("content", CONTENTS), ("target", TARGETS),
                               ("device", DEVICES), ("layout", LAYOUTS), ("hookup", HOOKUPS),
-                              ("lightmap_format", LIGHTMAP_FORMATS)):
+                              ("lightmap_format", LIGHTMAP_FORMATS), ("texel_indirect", TEXEL_INDIRECT)):
             value = getattr(self, name)
             if value not in allowed:
                 raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {value!r}")

@@ -165,12 +165,17 @@ def _page_side(owners: list, scene, uvs: dict, settings) -> tuple[tuple, float]:
 
 
 def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, settings, dev,
-                   stages, texel_extra=None) -> LightmapResult:
+                   stages, texel_extra=None, gather=None) -> LightmapResult:
     """Lay out, rasterise and light the lightmaps of ``request`` (stages of ``pipeline.bake``).
 
     per_vertex: {"indirect": float32[V,3]} per-shading-vertex solution, interpolated over each
     triangle; direct light is evaluated per texel with shadow rays. texel_extra(points, normals)
     -> {content: float32[N,3]} supplies per-texel values of further contents (e.g. AO).
+    gather(points, normals, progress) -> float32[N,3]: a final gather of the solution (indirect
+    lighting at any points), with per_vertex["gathered"] its values at the vertices. A texel then
+    gets the interpolated solution plus what the gather finds at the texel beyond the
+    interpolation of its values at the vertices: detail finer than the mesh, while the solver's
+    accuracy at the vertices is kept (the gather's own error, mostly smooth, cancels).
     """
     from .. import direct
 
@@ -254,6 +259,11 @@ def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, 
         return np.concatenate(parts).astype(np.float32) if parts else np.zeros((0, 3), np.float32)
 
     indirect = stages.run("texel indirect", interpolate, per_vertex["indirect"])
+    if gather is not None and len(points):
+        detail = stages.run("texel gather", gather, points, normals,
+                            lambda f: stages.report("texel gather", f))
+        detail -= stages.run("texel indirect", interpolate, per_vertex["gathered"])
+        indirect = np.maximum(indirect + detail, 0.0)
     lighting = lit_direct + indirect
     tri = np.concatenate([r[2][r[0].triangle] for r in rastered]) if rastered else np.zeros(0, np.int64)
     contents = {"lighting": lighting, "indirect": indirect,

@@ -17,6 +17,7 @@ darken every corner twice, measured: see README). Back faces send nothing.
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
 
 from .. import device as device_mod
 from .. import hierarchy as hierarchy_mod
@@ -30,6 +31,15 @@ from .reference import Solution
 LOCAL = 2.0
 
 
+def sender_radiance(hier, els: Elements, lighting: np.ndarray, dev: device_mod.Device) -> wp.array:
+    """vec3[hier.count]: radiance leaving each node's front, ρ ⊙ lighting weighted by each
+    element's accessibility within LOCAL element sizes (hides surfaces closed in at close range),
+    averaged over the node's subtree. lighting: float32[n,3] irradiance/π per element."""
+    size = float(np.sqrt(np.median(els.area)))
+    local = ao.gather(hier, els, els.position, els.normal, LOCAL * size, dev).accessibility
+    return hierarchy_mod.node_means(hier, (els.albedo * lighting * local[:, None]).astype(np.float32))
+
+
 def solve(geometry, els: Elements, direct: np.ndarray, settings, dev: device_mod.Device,
           progress=None, hier=None) -> Solution:
     """One bounce of indirect lighting per element (float32[n,3], irradiance/π) from direct
@@ -41,9 +51,21 @@ def solve(geometry, els: Elements, direct: np.ndarray, settings, dev: device_mod
     """
     if hier is None:
         hier = hierarchy_mod.build(els, dev, geometry)
-    size = float(np.sqrt(np.median(els.area)))
-    local = ao.gather(hier, els, els.position, els.normal, LOCAL * size, dev).accessibility
-    radiance = hierarchy_mod.node_means(hier, (els.albedo * direct * local[:, None]).astype(np.float32))
-    g = ao.gather(hier, els, els.position, els.normal, geometry.far, dev, radiance=radiance,
+    g = ao.gather(hier, els, els.position, els.normal, geometry.far, dev,
+                  radiance=sender_radiance(hier, els, direct, dev),
                   progress=None if progress is None else (lambda f: progress("gather", f)))
     return Solution(g.light.astype(np.float32), {"nodes": hier.count, "iterations": 1})
+
+
+def final_gather(hier, els: Elements, lighting: np.ndarray, geometry, dev: device_mod.Device):
+    """A gather of the converged solution at any points (lightmap texels): returns
+    ``gather(points float32[N,3], normals float32[N,3] unit, progress=None) -> float32[N,3]``, the
+    indirect lighting (irradiance/π) that the elements' reflected light ρ ⊙ ``lighting``
+    (float32[n,3], direct + indirect per element) sends to each point over the tree."""
+    radiance = sender_radiance(hier, els, lighting, dev)
+
+    def gather(points, normals, progress=None):
+        return ao.gather(hier, els, points, normals, geometry.far, dev, radiance=radiance,
+                         progress=progress).light.astype(np.float32)
+
+    return gather

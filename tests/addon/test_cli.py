@@ -11,10 +11,12 @@ import pytest
 
 from radiosity_baker.addon import cli
 from radiosity_baker.addon.preview import render_preview
+from radiosity_baker.core.lightmap import files
 
-from scenes import GROUND, LIT, SHADOW, lit_ground, snapshot, value_at
+from scenes import GROUND, LIT, SHADOW, lit_ground, snapshot, value_at, vertex_colors
 
 FAST = ["--method", "direct", "--samples", "4"]
+LAMP_SCENE = Path(__file__).resolve().parents[2] / "sample_blends" / "lamp_scene.blend"
 
 
 @pytest.fixture
@@ -167,3 +169,38 @@ def test_preview_option_writes_png_and_keeps_it_out_of_saved_file(lit_blend, tmp
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bpy.ops.wm.open_mainfile(filepath=str(out))
     assert not bpy.data.materials and not bpy.data.cameras
+
+
+def _baked(out: Path, maps: Path, attribute: str):
+    """Every mesh's baked attribute (float32[ΣV,3]) in the saved ``out`` and the lightmap EXR's
+    covered texels (float32[N,3])."""
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    meshes = sorted({ob.data for ob in bpy.data.objects if ob.type == "MESH"}, key=lambda m: m.name)
+    per_vertex = np.concatenate([vertex_colors(m, attribute)[:, :3] for m in meshes])
+    exr = files.read_exr(maps / "Lightmap.exr")
+    return per_vertex, exr[exr[..., 3] > 0][:, :3]
+
+
+@pytest.mark.parametrize("method, content", [("bunnell", "lighting"), ("direct", "ao")])
+def test_bunnell_and_ao_bake_into_color_attributes_and_lightmaps(tmp_path, method, content):
+    """On the lamp scene: Bunnell's bounce adds light to the same direct light (same seed) in both
+    targets; AO lies in [0, 1], with occlusion where objects stand on the floor."""
+    def run(name, m):
+        out, maps = tmp_path / f"{name}.blend", tmp_path / name
+        assert cli.main(["bake", str(LAMP_SCENE), "--method", m, "--content", content, "--samples", "4",
+                         "--target", "both", "--output", str(maps), "--texel-density", "8",
+                         "--save", str(out)]) == 0
+        return _baked(out, maps, "Lighting")
+
+    vertices, texels = run("ours", method)
+    assert np.isfinite(vertices).all() and np.isfinite(texels).all() and len(texels) > 1000
+    if content == "ao":
+        for values in (vertices, texels):
+            assert values.min() >= 0.0 and values.max() <= 1.0
+            assert np.allclose(values[:, 0], values[:, 2])
+            assert values.min() < 0.5 < values.mean()  # open floor, occluded contact
+        return
+    direct_vertices, direct_texels = run("direct", "direct")
+    for ours, direct in ((vertices, direct_vertices), (texels, direct_texels)):
+        assert (ours >= direct - 1e-4).all()
+        assert ours.sum() > 1.02 * direct.sum()

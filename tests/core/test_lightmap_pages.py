@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake
+from radiosity_baker.core import Settings, bake, metrics
 from radiosity_baker.core.lightmap import LightmapRequest, LightmapTarget, files
 from radiosity_baker.core.lightmap.pages import bilinear, dilate
 from radiosity_baker.core.scene import LAMP_POINT
@@ -42,8 +42,10 @@ def _room():
 @pytest.fixture(scope="module")
 def room_bake(tmp_path_factory):
     sc, parts = _room()
+    # interpolation alone: texels then hold exactly the solution at the vertices (the final
+    # gather's detail is tested below)
     settings = Settings(method="reference", light_samples=1, visibility_rays=4, texel_density=24.0,
-                        padding=3, device="cpu")
+                        padding=3, device="cpu", texel_indirect="interpolate")
     request = LightmapRequest(_targets(sc, parts), cache_dir=tmp_path_factory.mktemp("cache"))
     return sc, parts, bake(sc, settings, lightmap=request)
 
@@ -181,3 +183,57 @@ def test_ao_lightmap_matches_per_vertex_ao_at_the_vertices(tmp_path):
     # AO falls to 0.5 in the crease where floor meets wall, within a texel: vertices on the crease
     # differ most from the texel centres next to it.
     assert error.mean() < 0.005 and error.max() < 0.15
+
+
+def _wall_and_floor(floor_quads: int):
+    """A bright 2 m wall at x = −1 facing +x, lit by a point lamp near it, over a 2 m floor of
+    ``floor_quads``² quads: the floor's indirect light falls off steeply away from the wall."""
+    fp, fn, ft = shapes.grid(2.0, floor_quads)
+    wp_, wn, wt = shapes.grid(2.0, 8)
+    rot = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], np.float32)  # +z → +x
+    wp_ = wp_ @ rot.T + np.array([-1.0, 0.0, 1.0], np.float32)
+    parts = [(fp, fn, ft, (0.5, 0.5, 0.5), (0, 0, 0)), (wp_, wn @ rot.T, wt, (0.9, 0.9, 0.9), (0, 0, 0))]
+    return shapes.scene(parts, shapes.lamp(LAMP_POINT, (-0.7, 0.0, 1.0), power=(300.0,) * 3)), parts
+
+
+def _floor_texels_at(points_xy, floor_pos, floor_tris, page, corner_uv):
+    """The lightmap's values (bilinear, as a GPU samples) at floor points float[N,2]: each point
+    is carried to the UVs through its triangle's barycentric coordinates."""
+    a, b, c = (floor_pos[floor_tris[:, k], :2].astype(np.float64) for k in range(3))
+    e1, e2, rel = b - a, c - a, points_xy[:, None, :] - a[None]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    u = (rel[..., 0] * e2[:, 1] - rel[..., 1] * e2[:, 0]) / det
+    v = (e1[:, 0] * rel[..., 1] - e1[:, 1] * rel[..., 0]) / det
+    inside = (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9)
+    t = inside.argmax(axis=1)
+    k = np.arange(len(points_xy))
+    u, v = u[k, t], v[k, t]
+    uv = corner_uv.reshape(-1, 3, 2)[t].astype(np.float64)
+    at = (1 - u - v)[:, None] * uv[:, 0] + u[:, None] * uv[:, 1] + v[:, None] * uv[:, 2]
+    return bilinear(page.rgb, at)
+
+
+def test_final_gather_brings_indirect_detail_finer_than_the_mesh_into_texels(tmp_path):
+    """A floor of 2×2 quads cannot hold the steep fall-off of the wall's bounce light in its 9
+    vertices; the texels' final gather over the hierarchy restores it. Truth: the reference
+    solver's per-vertex indirect light on the same floor made of 24×24 quads."""
+    fine, fine_parts = _wall_and_floor(24)
+    settings = Settings(method="reference", content="indirect", light_samples=4, texel_density=32.0,
+                        padding=2, device="cpu")
+    truth = bake(fine, settings).output[:len(fine_parts[0][0])]
+    inner = np.all(np.abs(fine_parts[0][0][:, :2]) < 0.9, axis=1)  # away from the floor's border
+    points, truth = fine_parts[0][0][inner, :2], truth[inner]
+
+    coarse, parts = _wall_and_floor(2)
+    errors = {}
+    for mode in ("interpolate", "gather"):
+        s = Settings(**{**settings.as_dict(), "texel_indirect": mode, "target": "lightmap"})
+        r = bake(coarse, s, lightmap=LightmapRequest(_targets(coarse, parts),
+                                                     cache_dir=tmp_path / "cache"))
+        assert ("texel gather" in r.timings) == (mode == "gather")
+        page, = r.lightmap.pages
+        ours = _floor_texels_at(points, parts[0][0], parts[0][2], page, r.lightmap.uv["part0"])
+        errors[mode] = metrics.relative_rmse(ours, truth)
+    print(f"\nfloor indirect vs the fine reference, relative RMSE: {errors}")
+    assert errors["interpolate"] > 0.1  # the coarse mesh really misses it
+    assert errors["gather"] < 0.5 * errors["interpolate"]

@@ -1,0 +1,56 @@
+"""The accuracy/speed harness (bench/accuracy.py) runs end to end and writes what README quotes.
+
+A small run (one scene, low sample counts) proves the command produces the JSON, the markdown
+tables and the plot, with every method placed on Cycles' error/time curve for lighting and AO.
+The figures of a real run are in bench/results and README; here only their shape and sense count.
+"""
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _accuracy_module():
+    spec = importlib.util.spec_from_file_location("bench_accuracy", ROOT / "bench" / "accuracy.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_equal_error_time_interpolates_and_extrapolates_on_the_log_log_curve():
+    accuracy = _accuracy_module()
+    errors, seconds = [0.4, 0.2, 0.1], [1.0, 4.0, 16.0]  # error ∝ t^-1/2
+    t, extrapolated = accuracy.equal_error_seconds(errors, seconds, 0.2 / 2 ** 0.5)
+    assert t == pytest.approx(8.0) and not extrapolated
+    t, extrapolated = accuracy.equal_error_seconds(errors, seconds, 0.05)
+    assert t == pytest.approx(64.0) and extrapolated
+
+
+@pytest.mark.slow
+def test_accuracy_bench_writes_tables_and_plot_for_lighting_and_ao(tmp_path):
+    accuracy = _accuracy_module()
+    assert accuracy.main(["--scenes", "lamp_scene", "--methods", "direct", "bunnell",
+                          "--samples", "4", "16", "--reference-samples", "64", "--device", "cpu",
+                          "--output", str(tmp_path)]) == 0
+    (json_path,) = tmp_path.glob("accuracy-*.json")
+    results = json.loads(json_path.read_text())
+    scene = results["scenes"]["lamp_scene"]
+    lighting, ao = scene["lighting"], scene["ao"]
+    assert [c["samples"] for c in lighting["cycles"]] == [4, 16]
+    # Cycles converges: 16 samples are closer to the truth than 4
+    assert lighting["cycles"][1]["relative_rmse"] < lighting["cycles"][0]["relative_rmse"]
+    assert ao["cycles"][1]["mean_abs_error"] < ao["cycles"][0]["mean_abs_error"]
+    by_method = {o["method"]: o for o in lighting["ours"]}
+    # direct light alone misses the indirect part, Bunnell's bounce brings some of it back
+    assert by_method["direct"]["mean_bias"] < by_method["bunnell"]["mean_bias"] < 0.1
+    assert by_method["bunnell"]["relative_rmse"] < by_method["direct"]["relative_rmse"]
+    (ours_ao,) = ao["ours"]
+    assert ours_ao["mean_abs_error"] < 0.1
+    for row in lighting["ours"] + ao["ours"]:
+        assert row["seconds"] > 0 and row["speedup_at_equal_error"] > 0
+    table = json_path.with_suffix(".md").read_text()
+    assert "| lamp_scene | **bunnell** (cpu) |" in table and "| lamp_scene | **ao** (cpu) |" in table
+    assert json_path.with_suffix(".png").stat().st_size > 10_000
