@@ -1,4 +1,5 @@
-"""The reference solver against Cycles on the sample scenes (DIFFUSE, Direct + Indirect, no Color).
+"""The reference solver (and Bunnell's bounce) against Cycles on the sample scenes (DIFFUSE,
+Direct + Indirect, no Color).
 
 Tolerances (issue #3): relative RMSE of lighting ≤ 5 %, mean bias within ±2 %, over all vertices
 of the scene's receivers. The Cycles reference uses 2048 samples and 64 bounces; its own noise is
@@ -18,6 +19,10 @@ ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "reference_vs_cycles.json"
 CYCLES_SAMPLES = 2048
 MAX_RMSE, MAX_BIAS = 0.05, 0.02
+# Bunnell's one bounce misses the later ones (README, "Accuracy and speed"): most in the white
+# Cornell box (measured 19.8 % RMSE, −16.9 % bias), little in the open lamp scene (7.5 %, −3.2 %).
+# Its bounds say what it is: (largest RMSE, lowest bias, highest bias) per scene.
+BUNNELL = {"cornell_box.blend": (0.25, -0.20, 0.0), "lamp_scene.blend": (0.10, -0.05, 0.02)}
 
 
 def receivers(scene):
@@ -38,6 +43,7 @@ def receivers(scene):
 @pytest.mark.slow
 @pytest.mark.parametrize("blend", ["cornell_box.blend", "lamp_scene.blend"])
 def test_reference_matches_cycles_on_sample_scene(blend):
+    """And Bunnell's bounce against the same Cycles bake, within its own (wider) bounds."""
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / blend))
     names = receivers(bpy.context.scene)
     reference = cycles_bake_vertex_colors(names, samples=CYCLES_SAMPLES)
@@ -45,6 +51,9 @@ def test_reference_matches_cycles_on_sample_scene(blend):
     figures = metrics.summary(stack(ours, names), stack(reference, names))
     figures.update({"cycles_samples": CYCLES_SAMPLES, "vertices": int(stack(ours, names).shape[0]),
                     "elements": result.counts["elements"], "seconds": round(seconds, 2)})
+    bunnell, _, bunnell_seconds = bake_vertex_values(names, Settings(method="bunnell"))
+    figures["bunnell"] = {**metrics.summary(stack(bunnell, names), stack(reference, names)),
+                          "seconds": round(bunnell_seconds, 2)}
     print(f"\n{blend}: {figures}")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     table = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
@@ -52,3 +61,6 @@ def test_reference_matches_cycles_on_sample_scene(blend):
     RESULTS.write_text(json.dumps(table, indent=2, sort_keys=True) + "\n")
     assert figures["relative_rmse"] <= MAX_RMSE
     assert abs(figures["mean_bias"]) <= MAX_BIAS
+    max_rmse, low, high = BUNNELL[blend]
+    assert figures["bunnell"]["relative_rmse"] <= max_rmse
+    assert low <= figures["bunnell"]["mean_bias"] <= high
