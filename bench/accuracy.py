@@ -42,8 +42,8 @@ sys.path.insert(0, str(ROOT / "tests" / "addon"))
 from test_reference_vs_cycles import receivers  # noqa: E402  (the same receiver choice as the test)
 
 
-# What each quantity is baked as in Cycles, which of our settings give it, how errors are
-# summarised, and which summary entry the equal-error speedup is measured on.
+# What each quantity is baked as in Cycles, how errors are summarised, and which summary entry the
+# equal-error speedup is measured on.
 QUANTITIES = {
     "lighting": {"bake_type": "DIFFUSE", "summary": metrics.summary, "error": "relative_rmse"},
     "ao": {"bake_type": "AO", "summary": metrics.scalar_summary, "error": "mean_abs_error"},
@@ -101,7 +101,7 @@ def run_quantity(names, quantity, runs, samples, reference_samples):
         print(f"  {quantity} {label}: {seconds:.2f} s, {q['error']} {row[q['error']]:.4f}, "
               f"speedup {row['speedup_at_equal_error']}{' (extrapolated)' if extrapolated else ''}", flush=True)
         ours.append(row)
-    return {"error": q["error"], "truth_mean": round(float(np.asarray(truth).mean()), 5),
+    return {"error": q["error"], "truth_mean": round(float(truth.mean()), 5),
             "cycles": cycles, "ours": ours}
 
 
@@ -133,16 +133,16 @@ def markdown(results) -> str:
         keys = [k for k in keys if k not in ("samples", "seconds")]
         lines = [f"| scene | {quantity} | time (s) | {' | '.join(heads)} | Cycles time at equal error (s) | speedup |",
                  "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+        def errors(row):
+            return " | ".join(f"{row[k]:+.4f}" if "bias" in k else f"{row[k]:.4f}" for k in keys)
+
         for scene, r in scenes.items():
             for c in r["cycles"]:
-                lines.append(f"| {scene} | Cycles {c['samples']} spp | {c['seconds']:.2f} | "
-                             + " | ".join(f"{c[k]:+.4f}" if "bias" in k else f"{c[k]:.4f}" for k in keys) + " | | |")
+                lines.append(f"| {scene} | Cycles {c['samples']} spp | {c['seconds']:.2f} | {errors(c)} | | |")
             for o in r["ours"]:
                 mark = "*" if o["extrapolated"] else ""
-                lines.append(f"| {scene} | **{o['method']}** ({o['device']}) | {o['seconds']:.2f} | "
-                             + " | ".join(f"{o[k]:+.4f}" if "bias" in k else f"{o[k]:.4f}" for k in keys)
-                             + f" | {o['cycles_seconds_at_equal_error']:.2f}{mark} | "
-                             f"{o['speedup_at_equal_error']:.1f}×{mark} |")
+                lines.append(f"| {scene} | **{o['method']}** ({o['device']}) | {o['seconds']:.2f} | {errors(o)} | "
+                             f"{o['cycles_seconds_at_equal_error']:.2f}{mark} | {o['speedup_at_equal_error']:.1f}×{mark} |")
         tables.append("\n".join(lines))
     return "\n\n".join(tables)
 
