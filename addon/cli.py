@@ -37,11 +37,35 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, not {value}")
-    return value
+def _bounded(kind, low, high):
+    """An argparse type: ``kind`` (int or float) within [low, high] (None: open)."""
+    def convert(text: str):
+        value = kind(text)
+        if low is not None and not value >= low:
+            raise argparse.ArgumentTypeError(f"must be at least {low:g}, not {value}")
+        if high is not None and not value <= high:
+            raise argparse.ArgumentTypeError(f"must be at most {high:g}, not {value}")
+        return value
+    return convert
+
+
+def _add_setting(group, f) -> None:
+    """The command-line option of Settings field ``f``, from its metadata (core.settings.Option)."""
+    opt = core_settings.option(f.name)
+    flag = core_settings.flag(f.name)
+    text = core_settings.describe(f.name).replace("%", "%%")
+    if isinstance(f.default, bool):
+        group.add_argument(flag, dest=f.name, action="store_true", help=text)
+        return
+    kwargs = dict(dest=f.name, default=f.default, help=text + " (default: %(default)s)",
+                  metavar=core_settings.metavar(f.name))
+    if opt.choices is not None:
+        kwargs["choices"] = opt.choices
+        if f.name == "hookup":  # `--hookup` alone asks for the node pair
+            kwargs["nargs"], kwargs["const"] = "?", "node"
+    elif isinstance(f.default, (int, float)):
+        kwargs["type"] = _bounded(type(f.default), opt.low, opt.high)
+    group.add_argument(flag, **kwargs)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -49,79 +73,15 @@ def _parser() -> argparse.ArgumentParser:
                                             "(`build-extension --help`: build the extension zips.)")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     bake = commands.add_parser("bake", help="bake FILE.blend (the file itself is left unchanged)")
-    defaults = Settings()
     bake.add_argument("blend", metavar="FILE.blend", help="the .blend file to bake")
-    bake.add_argument("--method", choices=core_settings.METHODS + tuple(core_settings.METHOD_ALIASES),
-                      default=defaults.method,
-                      help="direct: lamps and emitters only; the others add indirect "
-                           "bounces (default: %(default)s)")
-    bake.add_argument("--content", choices=core_settings.CONTENTS, default=defaults.content,
-                      help="lighting (irradiance/π), combined (emission + albedo × lighting) or "
-                           "indirect lighting only (default: %(default)s)")
-    bake.add_argument("--target", choices=core_settings.TARGETS, default=defaults.target,
-                      help="where results go (default: %(default)s)")
-    bake.add_argument("--attribute", metavar="NAME", default=defaults.attribute,
-                      help="color attribute written, the only one ever overwritten "
-                           "(default: %(default)s)")
-    bake.add_argument("--device", choices=core_settings.DEVICES, default=defaults.device,
-                      help="auto: CUDA when usable, else the CPU (default: %(default)s)")
     bake.add_argument("--objects", metavar="A,B", type=lambda s: [n for n in s.split(",") if n],
                       help="names of the objects to write (default: every mesh); all objects "
                            "still cast and reflect light")
-    bake.add_argument("--samples", dest="light_samples", metavar="N", type=_positive_int,
-                      default=defaults.light_samples,
-                      help="shadow samples per light and receiver (default: %(default)s)")
-    bake.add_argument("--rays", dest="visibility_rays", metavar="N", type=_positive_int,
-                      default=defaults.visibility_rays,
-                      help="visibility rays per element pair (default: %(default)s)")
-    bake.add_argument("--bounces", metavar="N", type=_positive_int, default=defaults.bounces,
-                      help="maximum indirect bounces (default: %(default)s)")
-    bake.add_argument("--tolerance", metavar="X", type=float, default=defaults.tolerance,
-                      help="stop bouncing when the largest relative change is below this "
-                           "(default: %(default)s)")
-    bake.add_argument("--max-pairs", metavar="N", type=_positive_int, default=defaults.max_pairs,
-                      help="memory budget of the all-pairs transport, in element pairs "
-                           "(default: %(default)s)")
-    bake.add_argument("--seed", metavar="N", type=int, default=defaults.seed,
-                      help="random seed of the sample jitter (default: %(default)s)")
-    bake.add_argument("--bake-copy", action="store_true",
-                      help="bake objects whose modifiers change their topology into a new "
-                           "object <name>_baked instead of skipping them")
-    bake.add_argument("--ao-distance", metavar="M", type=float, default=defaults.ao_distance,
-                      help="for --content ao: occluders farther than this (m) do not count; 0: the "
-                           "world's AO distance (default: %(default)s)")
-    lightmap = bake.add_argument_group("lightmaps (--target lightmap or both)")
-    lightmap.add_argument("--texel-density", metavar="X", type=float, default=defaults.texel_density,
-                          help="texels per metre of surface (default: %(default)s)")
-    lightmap.add_argument("--max-size", metavar="N", type=_positive_int, default=defaults.max_size,
-                          help="largest lightmap side in texels (default: %(default)s)")
-    lightmap.add_argument("--padding", metavar="N", type=_positive_int, default=defaults.padding,
-                          help="texels between charts (default: %(default)s)")
-    lightmap.add_argument("--layout", choices=core_settings.LAYOUTS, default=defaults.layout,
-                          help="one atlas for all objects or one lightmap each "
-                               "(default: %(default)s)")
-    lightmap.add_argument("--output", metavar="DIR", default=defaults.output,
-                          help="folder for the EXR lightmaps and PNG previews; '//' is the "
-                               ".blend's folder (default: %(default)s)")
-    lightmap.add_argument("--hookup", nargs="?", const="node", default=defaults.hookup,
-                          choices=core_settings.HOOKUPS,
-                          help="add a UV Map + Image Texture node pair to each material "
-                               "('--hookup multiply' also multiplies it into the Base Color)")
-    lightmap.add_argument("--reunwrap", action="store_true",
-                          help="make new Lightmap UVs even where a mesh has them")
-    lightmap.add_argument("--supersample", metavar="N", type=_positive_int,
-                          default=defaults.supersample,
-                          help="lighting samples per texel along each axis (default: %(default)s)")
-    lightmap.add_argument("--texel-indirect", choices=core_settings.TEXEL_INDIRECT,
-                          default=defaults.texel_indirect,
-                          help="indirect light per texel: the per-vertex solution interpolated, or "
-                               "that plus the detail of a final gather over the element hierarchy "
-                               "(default: %(default)s)")
-    lightmap.add_argument("--lightmap-format", choices=core_settings.LIGHTMAP_FORMATS,
-                          default=defaults.lightmap_format,
-                          help="EXR channel precision (default: %(default)s)")
-    lightmap.add_argument("--pack-images", action="store_true",
-                          help="pack the lightmap images into the saved .blend")
+    groups = {"solver": bake.add_argument_group("light transport"),
+              "output": bake.add_argument_group("what is baked and written"),
+              "lightmap": bake.add_argument_group("lightmaps (--target lightmap or both)")}
+    for f in fields(Settings):
+        _add_setting(groups[core_settings.option(f.name).group], f)
     bake.add_argument("--save", metavar="OUT.blend", type=Path,
                       help="save the baked scene here (nothing is saved without it)")
     bake.add_argument("--report", metavar="REPORT.json", type=Path,
@@ -178,9 +138,16 @@ def _bake(args) -> int:
     except RuntimeError as exc:
         raise UsageError(f"cannot open {blend}: {_first_line(exc)}") from None
 
-    job = BakeJob(settings, args.objects, progress=_Progress())
+    told = set()
+
+    def warn(message: str) -> None:
+        if message not in told:
+            told.add(message)
+            print(f"{PROG}: warning: {message}", file=sys.stderr, flush=True)
+
+    job = BakeJob(settings, args.objects, progress=_Progress(), notify=warn)
     for message in job.run_sync(bpy.context):
-        print(f"{PROG}: warning: {message}", file=sys.stderr)
+        warn(message)
 
     if "save" in outputs:
         try:

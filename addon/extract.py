@@ -16,15 +16,13 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ..core.elements import shading_vertices
 from ..core.scene import (LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SHAPE_ELLIPSE,
                           SHAPE_RECTANGLE, Lamps, SceneData)
 
 # Object types whose evaluated geometry is a surface (others: empties, cameras, hair, volumes…).
 # The depsgraph hands the non-mesh ones out already converted, as a mesh instance of themselves.
 _SURFACE_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
-# Corner normals are grouped per vertex after rounding to 1/1024 (≈0.06°): corners of a smooth
-# vertex carry the same normal, corners on either side of a hard edge differ by far more.
-_NORMAL_STEPS = 1024
 _GREY = (0.8, 0.8, 0.8)
 # Custom property on an object made by realize_copy: the name of the object it was made from.
 COPY_SOURCE_PROPERTY = "radiosity_baker_source"
@@ -45,13 +43,14 @@ class TargetMesh:
     object_name: name of the original object.
     mesh_name: ``ob.data.name`` of the original object.
     corner_shading: int32[C], for each face corner (loop) of the evaluated mesh, the global
-        shading-vertex index into ``SceneData``.
+        shading-vertex index (``core.elements.shading_vertices`` of the extracted scene: where the
+        bake's per-shading-vertex results are).
     corner_vert: int32[C], evaluated mesh corner -> vertex index.
     num_vertices: vertex count of the evaluated mesh.
     topology_changed: the evaluated vertex count differs from the original ``ob.data`` one
         (modifiers added or removed vertices), so results do not map onto the original mesh.
     corner_triangles: int32[T,3], the face corners of each of the object's triangles, in the order
-        of its triangles in ``SceneData`` (which start at ``triangle_offset``).
+        of its triangles in ``SceneData`` (which start at ``triangle_offset``) and of their corners.
     """
 
     object_name: str
@@ -66,9 +65,12 @@ class TargetMesh:
 
 @dataclass
 class Extraction:
-    """The extracted scene, the objects results can be written to, and what the user should know."""
+    """The extracted scene, its shading vertices (``core.elements.ShadingVertices``: where the
+    bake's per-vertex results are), the objects results can be written to, and what the user
+    should know."""
 
     scene: SceneData
+    shading: object = None
     targets: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
 
@@ -276,17 +278,16 @@ def _fmt(rgb) -> str:
 class _Geometry:
     """One evaluated mesh in its local space, read once and shared by all its instances.
 
-    positions, normals: float32[S,3] shading vertices; triangles: int32[T,3]; albedo, emission:
-    float32[T,3]; corner_shading, corner_vert: int32[C]; loops: int32[T,3] corners of each
-    triangle; num_vertices: mesh vertex count.
+    positions: float32[V,3] vertices; corner_normals: float32[C,3] shading normal per face corner;
+    triangles: int32[T,3] vertex indices; albedo, emission: float32[T,3]; corner_vert: int32[C];
+    loops: int32[T,3] face corners of each triangle; num_vertices: mesh vertex count.
     """
 
     positions: np.ndarray
-    normals: np.ndarray
+    corner_normals: np.ndarray
     triangles: np.ndarray
     albedo: np.ndarray
     emission: np.ndarray
-    corner_shading: np.ndarray
     corner_vert: np.ndarray
     num_vertices: int
     loops: np.ndarray
@@ -305,12 +306,13 @@ def _read_attribute(me, name, domain_size, width, dtype, fallback):
 
 
 def _read_mesh(me, materials: list, palette: _Materials, object_name: str):
-    """Shading vertices, triangles and colours of an evaluated mesh; None when it has no faces."""
+    """Vertices, corner normals, triangles and colours of an evaluated mesh; None when it has no
+    faces."""
     nv, nc, nt = len(me.vertices), len(me.loops), len(me.loop_triangles)
     if nt == 0:
         return None
     positions = _read_attribute(me, "position", nv, 3, np.float32, ("vertices", "co"))
-    if not np.isfinite(positions).all():
+    if not _finite(positions):
         raise ExtractionError(f"object {object_name} has NaN or infinite vertex positions")
     corner_vert = _read_attribute(me, ".corner_vert", nc, 1, np.int32, ("loops", "vertex_index"))
     loops = np.empty(nt * 3, np.int32)
@@ -325,21 +327,16 @@ def _read_mesh(me, materials: list, palette: _Materials, object_name: str):
         poly_material = _read_attribute(me, "material_index", len(me.polygons), 1, np.int32, None)
     else:
         poly_material = np.zeros(len(me.polygons), np.int32)
-
-    # One shading vertex per (vertex, quantised corner normal): hard edges split, smooth stays.
-    q = np.rint(corner_normals * _NORMAL_STEPS).astype(np.int64) + _NORMAL_STEPS
-    if nv < 1 << 27:  # vertex index and three 12-bit normal components fit one int64 key
-        key = (corner_vert.astype(np.int64) << 36) | (q[:, 0] << 24) | (q[:, 1] << 12) | q[:, 2]
-        _, first, corner_shading = np.unique(key, return_index=True, return_inverse=True)
-    else:
-        _, first, corner_shading = np.unique(np.column_stack([corner_vert, q]), axis=0,
-                                             return_index=True, return_inverse=True)
-    corner_shading = corner_shading.reshape(-1).astype(np.int32)
     albedo, emission = palette.paint(me, materials, loops, poly_material[tri_poly], object_name)
-    return _Geometry(positions=positions[corner_vert[first]], normals=corner_normals[first],
-                     triangles=corner_shading[loops], albedo=albedo, emission=emission,
-                     corner_shading=corner_shading, corner_vert=corner_vert, num_vertices=nv,
-                     loops=loops)
+    return _Geometry(positions=positions, corner_normals=corner_normals,
+                     triangles=corner_vert[loops], albedo=albedo, emission=emission,
+                     corner_vert=corner_vert, num_vertices=nv, loops=loops)
+
+
+def _finite(values: np.ndarray) -> bool:
+    """Whether every value is finite and not Blender's ±FLT_MAX stand-in for an overflow."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        return bool((np.abs(values) < np.finfo(np.float32).max / 2).all())
 
 
 def _object_materials(ob, me) -> list:
@@ -350,19 +347,21 @@ def _object_materials(ob, me) -> list:
 
 
 def _transform(geom: _Geometry, matrix: np.ndarray, name: str):
-    """World positions, normals (float32[S,3]) and CCW triangles of ``geom`` under ``matrix``."""
+    """World positions (float64[V,3]), per-triangle-corner normals (float32[T,3,3]), CCW triangles
+    (int32[T,3]) and their face corners (int32[T,3], in the same corner order) of ``geom`` under
+    ``matrix``."""
     linear, offset = matrix[:3, :3], matrix[:3, 3]
     positions = geom.positions.astype(np.float64) @ linear.T + offset
-    if not np.isfinite(positions).all():
+    if not _finite(positions):
         raise ExtractionError(f"object {name} has NaN or infinite vertex positions in world space")
     normal_matrix = np.linalg.pinv(linear).T  # pinv: a zero-scaled axis must not raise
-    normals = geom.normals.astype(np.float64) @ normal_matrix.T
+    normals = geom.corner_normals.astype(np.float64) @ normal_matrix.T
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.where(length > 0, normals / np.where(length > 0, length, 1.0), (0.0, 0.0, 1.0))
-    triangles = geom.triangles
+    loops = geom.loops
     if np.linalg.det(linear) < 0:  # a mirror reverses the winding seen from the normal side
-        triangles = triangles[:, [0, 2, 1]]
-    return positions.astype(np.float32), normals.astype(np.float32), triangles
+        loops = loops[:, [0, 2, 1]]
+    return positions, normals.astype(np.float32)[loops], geom.corner_vert[loops], loops
 
 
 # ----------------------------------------------------------------------------------------------
@@ -420,7 +419,7 @@ def _lamps(items: list) -> Lamps:
     def col(key, dtype):
         return np.asarray([x[key] for x in items], dtype)
 
-    return Lamps(kind=col("kind", np.int32), position=col("position", np.float32),
+    return Lamps(kind=col("kind", np.int32), position=col("position", np.float64),
                  direction=col("direction", np.float32), axis_u=col("axis_u", np.float32),
                  axis_v=col("axis_v", np.float32), size=col("size", np.float32),
                  shape=col("shape", np.int32), power=col("power", np.float32),
@@ -446,7 +445,7 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
     collections = _render_collections(depsgraph.view_layer)
     receiver_names = None if receivers is None else {ob.name: ob for ob in receivers}
     geometries: dict = {}      # (data pointer, materials) -> _Geometry or None
-    parts = []                 # (positions, normals, triangles, albedo, emission)
+    parts = []                 # (positions, corner normals, triangles, albedo, emission, object)
     names: list[str] = []
     targets: list[TargetMesh] = []
     lamp_items: list = []
@@ -495,18 +494,17 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
             no_faces.append(name)
             continue
 
-        positions, normals, triangles = _transform(geom, matrix, name)
+        positions, normals, triangles, loops = _transform(geom, matrix, name)
         parts.append((positions, normals, triangles + offset, geom.albedo, geom.emission,
                       len(names)))
         names.append(name)
         if not inst.is_instance and (receiver_names is None or name in receiver_names):
             original = ob.original
             targets.append(TargetMesh(
-                object_name=name, mesh_name=original.data.name,
-                corner_shading=geom.corner_shading + np.int32(offset),
+                object_name=name, mesh_name=original.data.name, corner_shading=None,
                 corner_vert=geom.corner_vert, num_vertices=geom.num_vertices,
                 topology_changed=geom.num_vertices != len(original.data.vertices),
-                corner_triangles=geom.loops, triangle_offset=triangle_offset))
+                corner_triangles=loops, triangle_offset=triangle_offset))
         offset += positions.shape[0]
         triangle_offset += triangles.shape[0]
 
@@ -532,10 +530,23 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
         return np.concatenate([p[i] for p in parts])
 
     tri_object = np.concatenate([np.full(p[2].shape[0], p[5], np.int32) for p in parts])
-    scene = SceneData(positions=cat(0), normals=cat(1), triangles=cat(2).astype(np.int32),
-                      tri_object=tri_object, albedo=cat(3), emission=cat(4),
-                      lamps=_lamps(lamp_items), object_names=names, ao_distance=_ao_distance(depsgraph.scene))
-    return Extraction(scene=scene, targets=targets, warnings=warnings)
+    # Positions are kept relative to the scene's centre, computed in double precision, so a scene
+    # far from the world origin keeps float32 precision (core.scene.SceneData).
+    world = cat(0)
+    centre = 0.5 * (world.min(axis=0) + world.max(axis=0))
+    lamps = _lamps(lamp_items)
+    lamps.position = (lamps.position.astype(np.float64) - centre).astype(np.float32)
+    scene = SceneData(positions=(world - centre).astype(np.float32), corner_normals=cat(1),
+                      triangles=cat(2).astype(np.int32), tri_object=tri_object, albedo=cat(3),
+                      emission=cat(4), lamps=lamps, object_names=names,
+                      ao_distance=_ao_distance(depsgraph.scene), origin=centre)
+    # Results come per shading vertex (split by core where a vertex's normals differ).
+    shading = shading_vertices(scene)
+    for t in targets:
+        t.corner_shading = np.empty(t.corner_vert.shape[0], np.int32)
+        span = slice(t.triangle_offset, t.triangle_offset + t.corner_triangles.shape[0])
+        t.corner_shading[t.corner_triangles] = shading.corner[span]
+    return Extraction(scene=scene, shading=shading, targets=targets, warnings=warnings)
 
 
 def _ao_distance(scene) -> float:

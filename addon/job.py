@@ -22,16 +22,19 @@ USER_ERRORS = (extract.ExtractionError, BakeError, ValueError)
 class BakeJob:
     """Bake ``settings`` into the objects named ``receivers`` (None: every mesh of the scene).
 
-    progress(stage, fraction) is optional and called from the thread that bakes. After
+    progress(stage, fraction) and notify(warning) are optional and called from the thread that
+    bakes (notify as each warning of the bake arises, e.g. a long bake announced before it runs). After
     ``finish()``: ``result`` (core BakeResult), ``timings`` (seconds per stage, extraction and
     writing included), ``warnings`` (extraction, bake and writing) and ``seconds`` (wall time).
     """
 
     def __init__(self, settings: Settings, receivers: Optional[Iterable[str]] = None,
-                 progress: Optional[Callable[[str, float], None]] = None):
+                 progress: Optional[Callable[[str, float], None]] = None,
+                 notify: Optional[Callable[[str], None]] = None):
         self.settings = settings
         self.receivers = None if receivers is None else list(receivers)
         self._user_progress = progress
+        self._notify = notify
         self._cancel = threading.Event()
         self._lock = threading.Lock()
         self._stage, self._fraction = "extract", 0.0
@@ -125,7 +128,7 @@ class BakeJob:
         """core.bake; any exception is kept for ``finish()`` to raise on the main thread."""
         try:
             self.result = core.bake(self.extraction.scene, self.settings, self._on_progress,
-                                    self._cancel, lightmap=self.lightmap_request)
+                                    self._cancel, lightmap=self.lightmap_request, notify=self._notify)
         except BaseException as exc:  # noqa: BLE001 - re-raised by finish()
             self.error = exc
             return

@@ -100,7 +100,7 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
             corner_uv = corner_uv.reshape(-1, 2)
         targets.append(LightmapTarget(
             object_name=ob.name, mesh_name=me.name, corner_vert=t.corner_vert,
-            corner_shading=t.corner_shading, corner_triangles=t.corner_triangles,
+            corner_triangles=t.corner_triangles,
             triangle_offset=t.triangle_offset, corner_uv=corner_uv))
     if not targets:
         raise ExtractionError("no object can be lightmapped" + (f": {warnings[-1]}" if warnings else ""))

@@ -3,7 +3,15 @@ from __future__ import annotations
 
 import bpy
 
+from ..core.settings import Settings, reads
 from .operator import OBJECT_OT_radiosity_bake
+
+
+def _prop(layout, s, name: str) -> None:
+    """``s.name`` in a row greyed out when the chosen method does not read it."""
+    row = layout.row()
+    row.active = reads(Settings(method=s.method, content=s.content).solver, name)
+    row.prop(s, name)
 
 
 class RENDER_PT_radiosity_bake(bpy.types.Panel):
@@ -29,20 +37,14 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col.prop(s, "attribute")
         col.prop(s, "device")
         col = layout.column(align=True)
-        col.prop(s, "light_samples")
-        sub = col.column(align=True)
-        sub.active = s.method != "direct"  # only the methods with indirect light use these
-        sub.prop(s, "visibility_rays")
-        sub.prop(s, "bounces")
-        row = layout.row()
-        row.active = s.content == "ao"
-        row.prop(s, "ao_distance")
+        for name in ("light_samples", "visibility_rays", "bounces", "ao_distance"):
+            _prop(col, s, name)
         layout.prop(s, "bake_copy")
         col = layout.column(heading="Lightmap")
         col.active = s.target != "vertex_colors"
         for name in ("texel_density", "max_size", "padding", "layout", "output", "hookup",
                      "reunwrap", "supersample", "texel_indirect", "lightmap_format", "pack_images"):
-            col.prop(s, name)
+            _prop(col, s, name)
         row = layout.row()
         row.scale_y = 1.5
         row.operator(OBJECT_OT_radiosity_bake.bl_idname, text="Bake", icon='RENDER_STILL')
@@ -67,11 +69,8 @@ class RENDER_PT_radiosity_bake_advanced(bpy.types.Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         s = context.scene.radiosity_baker
-        col = layout.column()
-        col.active = s.method != "direct"
-        col.prop(s, "tolerance")
-        col.prop(s, "max_pairs")
-        layout.prop(s, "seed")
+        for name in ("tolerance", "max_pairs", "seed"):
+            _prop(layout, s, name)
 
 
 classes = (RENDER_PT_radiosity_bake, RENDER_PT_radiosity_bake_advanced)

@@ -38,7 +38,7 @@ def _rgba(rgb: np.ndarray) -> np.ndarray:
 
 def write_color_attributes(extraction: Extraction, values, attribute_name: str, settings,
                            context=None) -> list[str]:
-    """Write per-shading-vertex ``values`` (float32[V,3], linear RGB, e.g. BakeResult.output) as a
+    """Write per-shading-vertex ``values`` (float32[S,3], linear RGB, e.g. BakeResult.output) as a
     POINT-domain FLOAT_COLOR attribute ``attribute_name`` (alpha 1) on each target's original mesh.
 
     Each vertex gets the mean of its face corners' values. Only the attribute of exactly that name
@@ -56,7 +56,7 @@ def write_color_attributes(extraction: Extraction, values, attribute_name: str, 
     name Blender reserves.
     """
     values = np.asarray(values, np.float32)
-    expected = (extraction.scene.num_vertices, 3)
+    expected = (extraction.shading.count, 3)
     if values.shape != expected:
         raise ValueError(f"values have shape {values.shape}, expected {expected}")
     warnings: list[str] = []

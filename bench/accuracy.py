@@ -36,6 +36,7 @@ from radiosity_baker.addon.compare import bake_vertex_values, stack
 from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
 from radiosity_baker.core import Settings, metrics
 from radiosity_baker.core import settings as core_settings
+from radiosity_baker.core.solvers import SOLVERS
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "addon"))
@@ -187,8 +188,8 @@ def _panel(ax, scene, quantity, r, reference_samples) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenes", nargs="+", default=["cornell_box", "lamp_scene"])
-    parser.add_argument("--methods", nargs="+", default=list(core_settings.METHODS),
-                        choices=core_settings.METHODS)
+    light = [name for name, info in SOLVERS.items() if info.light]
+    parser.add_argument("--methods", nargs="+", default=light, choices=light)
     parser.add_argument("--samples", nargs="+", type=int, default=[16, 64, 256, 1024])
     parser.add_argument("--reference-samples", type=int, default=4096)
     parser.add_argument("--no-ao", dest="ao", action="store_false", help="leave out AO against Cycles' AO bake")

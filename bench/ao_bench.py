@@ -26,10 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from radiosity_baker.core import Settings, SceneData, direct, elements, hierarchy
-from radiosity_baker.core import device as device_mod
+from radiosity_baker.core import Settings, SceneData, gather, hierarchy
+from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.scene import Lamps
-from radiosity_baker.core.solvers import ao
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -50,7 +49,7 @@ def terrain(vertices: int, phase: float = 0.0) -> SceneData:
     a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
     tris = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int32)
     t = len(tris)
-    return SceneData(positions=pos, normals=nrm, triangles=tris, tri_object=np.zeros(t, np.int32),
+    return SceneData(positions=pos, corner_normals=nrm[tris], triangles=tris, tri_object=np.zeros(t, np.int32),
                      albedo=np.full((t, 3), 0.5, np.float32), emission=np.zeros((t, 3), np.float32),
                      lamps=Lamps.empty(), object_names=["Terrain"])
 
@@ -64,19 +63,17 @@ def _median_time(fn, repeat: int) -> float:
     return statistics.median(times)
 
 
-def scaling(sizes, dev, repeat: int, pairs_limit: float) -> list:
+def scaling(sizes, settings: Settings, repeat: int, pairs_limit: float) -> list:
     rows = []
     pair_rate = None  # pairs per second of the all-pairs sum, from the last run
     for size in sizes:
-        sc = terrain(size)
-        els = elements.build(sc)
-        geometry = direct.SceneGeometry(sc, dev)
-        h = hierarchy.build(els, dev, geometry)
+        problem = Problem(terrain(size), settings)
+        els, h = problem.elements, problem.tree
         n = els.count
         last = {}
 
         def run():
-            last["gather"] = ao.gather(h, els, els.position, els.normal, 10.0, dev)
+            last["gather"] = gather.gather(problem, els.position, els.normal, 10.0)
 
         tree = _median_time(run, repeat)
         row = {"vertices": n, "nodes": h.count, "levels": h.levels, "tree_seconds": round(tree, 4),
@@ -84,7 +81,7 @@ def scaling(sizes, dev, repeat: int, pairs_limit: float) -> list:
                "visits_per_receiver": round(float(last["gather"].visits.mean()), 1)}
         if pair_rate is None or n * n / pair_rate <= pairs_limit:
             t0 = time.perf_counter()
-            brute = ao.gather(h, els, els.position, els.normal, 10.0, dev, open_k=ao.ALL_PAIRS).accessibility
+            brute = gather.gather(problem, els.position, els.normal, 10.0, open_k=gather.ALL_PAIRS).accessibility
             pairs = time.perf_counter() - t0
             pair_rate = n * n / pairs
             access = last["gather"].accessibility
@@ -101,28 +98,31 @@ def scaling(sizes, dev, repeat: int, pairs_limit: float) -> list:
     return rows
 
 
-def deforming(size: int, dev, frames: int) -> dict:
-    """Build once, then per frame move the hills: refit vs full rebuild (seconds, median)."""
-    sc = terrain(size)
-    els = elements.build(sc)
-    geometry = direct.SceneGeometry(sc, dev)
-    h = hierarchy.build(els, dev, geometry)
+def deforming(size: int, settings: Settings, frames: int) -> dict:
+    """Build once, then per frame move the hills: the tree refitted (``Problem.move``: elements,
+    device arrays and BVH updated, tree refitted) vs the tree rebuilt on the moved elements
+    (seconds, median); the AO of the two trees compared on the last frame."""
+    problem = Problem(terrain(size), settings)
+    h = problem.tree
     refits, rebuilds, errors = [], [], []
-    settings = Settings(content="ao", ao_distance=10.0)
     for f in range(1, frames + 1):
-        moved = elements.build(terrain(size, phase=0.2 * f))
+        moved = terrain(size, phase=0.2 * f)
+        problem.__dict__.pop("tree")  # move without the tree: its refit is timed on its own
+        problem.move(moved)
         t0 = time.perf_counter()
-        geometry.points.assign(terrain(size, phase=0.2 * f).positions)
-        hierarchy.refit(h, moved.position, moved.normal, moved.area)
+        hierarchy.refit(h, problem.surfels)
         refits.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
-        fresh = hierarchy.build(moved, dev, geometry)
+        fresh = hierarchy.build(problem)
         rebuilds.append(time.perf_counter() - t0)
+        problem.tree = h
         if f == frames:
-            a = ao.accessibility(h, moved, moved.position, moved.normal, settings, dev)
-            b = ao.accessibility(fresh, moved, moved.position, moved.normal, settings, dev)
+            els = problem.elements
+            a = gather.gather(problem, els.position, els.normal, 10.0).accessibility
+            problem.tree = fresh
+            b = gather.gather(problem, els.position, els.normal, 10.0).accessibility
             errors.append(float(np.abs(a - b).mean()))
-    return {"vertices": els.count, "nodes": h.count, "frames": frames,
+    return {"vertices": problem.elements.count, "nodes": h.count, "frames": frames,
             "refit_seconds": round(statistics.median(refits), 5),
             "rebuild_seconds": round(statistics.median(rebuilds), 5),
             "refit_vs_rebuild_ao_mean_abs": round(errors[0], 5)}
@@ -173,15 +173,14 @@ def main(argv=None) -> int:
     parser.add_argument("--samples", action="store_true",
                         help="also Bunnell vs the reference on the sample scenes (bpy)")
     args = parser.parse_args(argv)
-    dev = device_mod.select(args.device)
-    warm = terrain(2_000)  # compile the kernels outside the timings
-    warm_els = elements.build(warm)
-    warm_h = hierarchy.build(warm_els, dev, direct.SceneGeometry(warm, dev))
-    ao.gather(warm_h, warm_els, warm_els.position, warm_els.normal, 10.0, dev)
+    settings = Settings(device=args.device, content="ao", ao_distance=10.0)
+    warm = Problem(terrain(2_000), settings)  # compile the kernels outside the timings
+    gather.gather(warm, warm.elements.position, warm.elements.normal, 10.0)
+    dev = warm.device
     report = {"host": socket.gethostname(), "device": dev.name, "threads": dev.threads,
               "platform": platform.platform(), "python": sys.version.split()[0],
-              "scaling": scaling(args.sizes, dev, args.repeat, args.pairs_limit),
-              "deforming": deforming(args.deform_size, dev, args.frames)}
+              "scaling": scaling(args.sizes, settings, args.repeat, args.pairs_limit),
+              "deforming": deforming(args.deform_size, settings, args.frames)}
     print("deforming", report["deforming"], flush=True)
     if args.samples:
         report["bunnell_vs_reference"] = sample_scenes()

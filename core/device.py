@@ -6,14 +6,21 @@ offset of their range as the first argument: ``i = wp.tid() + offset``.
 """
 from __future__ import annotations
 
+import importlib
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Optional
 
 import warp as wp
 
+from .errors import BakeError
+
 _initialised = False
+# The package's modules that hold kernels (relative to this package), loaded by load_kernels.
+KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "lightmap.raster")
+_load_lock = threading.Lock()
 
 
 def init_warp() -> None:
@@ -43,11 +50,33 @@ def select(preference: str = "auto") -> Device:
     init_warp()
     cuda = wp.get_cuda_device_count() > 0
     if preference == "cuda" and not cuda:
-        raise RuntimeError("device 'cuda' requested but Warp found no usable CUDA GPU "
-                           "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
+        raise BakeError("device 'cuda' requested but Warp found no usable CUDA GPU "
+                        "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
     if preference in ("cuda", "auto") and cuda:
         return Device("cuda:0", 1)
     return Device("cpu", max(1, os.cpu_count() or 1))
+
+
+def load_kernels(device: Device, on_compile: Optional[Callable[[], None]] = None) -> int:
+    """Load (compiling the first time, then from Warp's kernel cache) every kernel module of the
+    package for ``device``; ``on_compile()`` is called once before the first module that is not
+    cached yet, so a caller can say why this bake takes longer. Safe to call from several threads
+    (e.g. an ahead-of-time warm-up and a bake). Returns the number of modules compiled."""
+    init_warp()
+    package = __name__.rpartition(".")[0]
+    compiled = 0
+    with _load_lock:
+        for name in KERNEL_MODULES:
+            module = importlib.import_module(f"{package}.{name}")
+            wm = wp.get_module(module.__name__)
+            block_dim = 1 if not device.is_cuda else None
+            ident = wm.get_module_identifier(block_dim)
+            if not os.path.isdir(os.path.join(wp.config.kernel_cache_dir, ident)):
+                if compiled == 0 and on_compile is not None:
+                    on_compile()
+                compiled += 1
+            wp.load_module(module, device=device.name)
+    return compiled
 
 
 def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
@@ -82,3 +111,21 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
     finally:
         if pool is not None:
             pool.shutdown(wait=True)
+
+
+def free_memory(device: Device) -> Optional[int]:
+    """Bytes of memory free for new arrays on ``device``: the GPU's free memory, or the system's
+    available memory for the CPU; None where it cannot be told."""
+    if device.is_cuda:
+        return int(wp.get_device(device.name).free_memory)
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None

@@ -4,7 +4,8 @@ Lighting is irradiance/π at the receiver's normal (radiance units, W m⁻² sr�
 DIFFUSE Direct without Color. Unoccluded transfer is analytic where it can be (exact polygon form
 factors for area lamps and emissive triangles, inverse-square for point/spot, cosine for sun);
 shadows are the visible fraction of stratified samples on the lamp, weighted by the transfer
-kernel so penumbrae stay unbiased where the kernel varies across the lamp.
+kernel so penumbrae stay unbiased where the kernel varies across the lamp. Samples are a rotated
+Hammersley set, stratified for any count.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import warp as wp
 
 from . import device as device_mod
 from .formfactor import outline_ff, tangent_frame, triangle_ff
+from .rays import lift, visible
 from .scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SceneData
 
 PI = math.pi
@@ -25,45 +27,33 @@ ELLIPSE_SIDES = 32
 ELLIPSE_SCALE = 1.0 / math.sqrt(ELLIPSE_SIDES / (2.0 * PI) * math.sin(2.0 * PI / ELLIPSE_SIDES))
 
 
-class SceneGeometry:
-    """The scene's triangles on the device: a BVH for shadow rays, the emissive triangles, lamps.
+class Lights:
+    """The scene's lamps and emissive triangles on the device, as the direct-light kernel reads them.
 
-    points: vec3[V] positions, indices: int32[3T] flat triangle corners (also the BVH's).
-    eps: ray offset (m) off surfaces, relative to the scene size; far: a length beyond the scene.
+    em_v0, em_v1, em_v2: vec3[E] corners of the emissive triangles with area; em_radiance: vec3[E];
+    lamp_*: one entry per lamp (see ``core.scene.Lamps``; spot cones as the cosine of the half
+    angle and the smoothstep width of the blend).
     """
 
     def __init__(self, scene: SceneData, dev: device_mod.Device):
-        self.device = dev
         d = dev.name
-        pos = np.ascontiguousarray(scene.positions, np.float32)
-        tris = np.ascontiguousarray(scene.triangles, np.int32)
-        self.points = wp.array(pos, dtype=wp.vec3, device=d)
-        self.indices = wp.array(tris.reshape(-1), dtype=wp.int32, device=d)
-        self.mesh = wp.Mesh(points=self.points, indices=self.indices)
-        lo, hi = pos.min(axis=0), pos.max(axis=0)
-        diag = float(np.linalg.norm(hi - lo)) or 1.0
-        self.eps = max(diag * 1e-5, 1e-7)
-        self.far = diag * 1e3 + 1e3
-
-        areas = scene.triangle_areas()
-        emissive = (scene.emission.max(axis=1) > 0.0) & (areas > 0.0)
-        etri = tris[emissive]
+        pos = np.asarray(scene.positions, np.float32)
+        emissive = (scene.emission.max(axis=1) > 0.0) & (scene.triangle_areas() > 0.0)
+        etri = scene.triangles[emissive]
         self.num_emitters = int(emissive.sum())
-        self.em_v0 = wp.array(pos[etri[:, 0]] if len(etri) else np.zeros((0, 3), np.float32), dtype=wp.vec3, device=d)
-        self.em_v1 = wp.array(pos[etri[:, 1]] if len(etri) else np.zeros((0, 3), np.float32), dtype=wp.vec3, device=d)
-        self.em_v2 = wp.array(pos[etri[:, 2]] if len(etri) else np.zeros((0, 3), np.float32), dtype=wp.vec3, device=d)
-        self.em_radiance = wp.array(np.ascontiguousarray(scene.emission[emissive], np.float32), dtype=wp.vec3, device=d)
-
+        self.em_v0, self.em_v1, self.em_v2 = (
+            wp.array(np.ascontiguousarray(pos[etri[:, k]]), dtype=wp.vec3, device=d) for k in range(3))
+        self.em_radiance = wp.array(np.ascontiguousarray(scene.emission[emissive], np.float32),
+                                    dtype=wp.vec3, device=d)
         lamps = scene.lamps
         self.num_lamps = len(lamps)
-        half_cone = 0.5 * lamps.spot_size.astype(np.float64)
-        cos_half = np.cos(half_cone)
+        cos_half = np.cos(0.5 * lamps.spot_size.astype(np.float64))
         smooth = (1.0 - cos_half) * lamps.spot_blend
         self.lamp_kind = wp.array(lamps.kind.astype(np.int32), dtype=wp.int32, device=d)
         self.lamp_pos = wp.array(lamps.position.astype(np.float32), dtype=wp.vec3, device=d)
-        self.lamp_dir = wp.array(_unit(lamps.direction), dtype=wp.vec3, device=d)
-        self.lamp_u = wp.array(_unit(lamps.axis_u), dtype=wp.vec3, device=d)
-        self.lamp_v = wp.array(_unit(lamps.axis_v), dtype=wp.vec3, device=d)
+        self.lamp_dir = wp.array(unit(lamps.direction), dtype=wp.vec3, device=d)
+        self.lamp_u = wp.array(unit(lamps.axis_u), dtype=wp.vec3, device=d)
+        self.lamp_v = wp.array(unit(lamps.axis_v), dtype=wp.vec3, device=d)
         self.lamp_size = wp.array(lamps.size.astype(np.float32), dtype=wp.vec2, device=d)
         self.lamp_shape = wp.array(lamps.shape.astype(np.int32), dtype=wp.int32, device=d)
         self.lamp_power = wp.array(lamps.power.astype(np.float32), dtype=wp.vec3, device=d)
@@ -71,29 +61,34 @@ class SceneGeometry:
         self.lamp_smooth = wp.array(smooth.astype(np.float32), dtype=wp.float32, device=d)
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
+def unit(v: np.ndarray) -> np.ndarray:
+    """float32[N,3] rows of ``v`` scaled to unit length (zero rows stay zero)."""
     v = np.asarray(v, np.float64).reshape(-1, 3)
     n = np.linalg.norm(v, axis=1, keepdims=True)
     return (v / np.where(n > 0, n, 1.0)).astype(np.float32)
 
 
 @wp.func
-def _visible(mesh: wp.uint64, origin: wp.vec3, target: wp.vec3) -> float:
-    """1 if nothing blocks the segment origin→target (stopping just short of target), else 0."""
-    d = target - origin
-    dist = wp.length(d)
-    if dist <= 0.0:
-        return 1.0
-    if wp.mesh_query_ray_anyhit(mesh, origin, d / dist, dist * 0.9999):
-        return 0.0
-    return 1.0
+def _radical_inverse(k: int) -> float:
+    """Van der Corput radical inverse of k in base 2: the bits of k mirrored behind the point."""
+    r = float(0.0)
+    f = float(0.5)
+    x = k
+    while x > 0:
+        if x % 2 == 1:
+            r += f
+        x = x / 2
+        f *= 0.5
+    return r
 
 
 @wp.func
-def _stratum(k: int, side: int, jitter_u: float, jitter_v: float) -> wp.vec2:
-    """A point of stratum k of a side×side grid over the unit square, jittered within it."""
-    inv = 1.0 / float(side)
-    return wp.vec2((float(k % side) + jitter_u) * inv, (float(k / side) + jitter_v) * inv)
+def sample2d(k: int, count: int, rotation: wp.vec2) -> wp.vec2:
+    """Point k of a ``count``-point Hammersley set over the unit square, shifted by ``rotation``
+    modulo 1 (Cranley–Patterson): stratified for any count, unbiased for a uniform rotation."""
+    u = (float(k) + 0.5) / float(count) + rotation[0]
+    v = _radical_inverse(k) + rotation[1]
+    return wp.vec2(u - wp.floor(u), v - wp.floor(v))
 
 
 @wp.func
@@ -114,7 +109,7 @@ def _weighted_visibility(mesh: wp.uint64, origin: wp.vec3, p: wp.vec3, n: wp.vec
     w = wp.max(wp.dot(n, d), 0.0) * wp.abs(wp.dot(nq, d)) / (d2 * d2 + 1.0e-30)
     if w <= 0.0:
         return wp.vec2(0.0, 0.0)
-    return wp.vec2(w, w * _visible(mesh, origin, q))
+    return wp.vec2(w, w * visible(mesh, origin, q))
 
 
 @wp.func
@@ -132,28 +127,29 @@ def _spot_factor(kind: int, w_from_lamp: wp.vec3, axis: wp.vec3, cos_half: float
 
 @wp.kernel
 def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
-                   normals: wp.array(dtype=wp.vec3), lamp_kind: wp.array(dtype=wp.int32),
+                   normals: wp.array(dtype=wp.vec3), sizes: wp.array(dtype=wp.float32),
+                   lamp_kind: wp.array(dtype=wp.int32),
                    lamp_pos: wp.array(dtype=wp.vec3), lamp_dir: wp.array(dtype=wp.vec3),
                    lamp_u: wp.array(dtype=wp.vec3), lamp_v: wp.array(dtype=wp.vec3),
                    lamp_size: wp.array(dtype=wp.vec2), lamp_shape: wp.array(dtype=wp.int32),
                    lamp_power: wp.array(dtype=wp.vec3), lamp_cos_half: wp.array(dtype=wp.float32),
                    lamp_smooth: wp.array(dtype=wp.float32), em_v0: wp.array(dtype=wp.vec3),
                    em_v1: wp.array(dtype=wp.vec3), em_v2: wp.array(dtype=wp.vec3),
-                   em_radiance: wp.array(dtype=wp.vec3), side: int, eps: float, far: float,
+                   em_radiance: wp.array(dtype=wp.vec3), count: int, far: float,
                    seed: int, ellipse_sides: int, ellipse_scale: float,
                    out: wp.array(dtype=wp.vec3), rays: wp.array(dtype=wp.int32)):
     i = wp.tid() + offset
     p = points[i]
     n = normals[i]
-    origin = p + n * eps
+    origin = lift(p, n, sizes[i])
     state = wp.rand_init(seed, i)
-    count = side * side
     total = wp.vec3(0.0)
     nrays = int(0)
 
     for l in range(lamp_kind.shape[0]):
         kind = lamp_kind[l]
         power = lamp_power[l]
+        rot = wp.vec2(wp.randf(state), wp.randf(state))
         if kind == LAMP_POINT or kind == LAMP_SPOT:
             to = lamp_pos[l] - p
             d2 = wp.dot(to, to)
@@ -170,17 +166,16 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
             if radius <= 0.0:
                 att = _spot_factor(kind, -w, lamp_dir[l], lamp_cos_half[l], lamp_smooth[l])
                 if att > 0.0:
-                    lit = att * _visible(mesh, origin, lamp_pos[l])
+                    lit = att * visible(mesh, origin, lamp_pos[l])
                     nrays += 1
             else:
                 t1, t2 = tangent_frame(w)
                 for k in range(count):
-                    st = _stratum(k, side, wp.randf(state), wp.randf(state))
-                    q = lamp_pos[l] + _disk(st, t1, t2, radius, radius)
+                    q = lamp_pos[l] + _disk(sample2d(k, count, rot), t1, t2, radius, radius)
                     att = _spot_factor(kind, wp.normalize(p - q), lamp_dir[l], lamp_cos_half[l],
                                        lamp_smooth[l])
                     if att > 0.0:
-                        lit += att * _visible(mesh, origin, q)
+                        lit += att * visible(mesh, origin, q)
                         nrays += 1
                 lit = lit / float(count)
             # intensity P/4π W/sr → irradiance I·cos/d² → lighting = irradiance/π
@@ -193,14 +188,13 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
             tan_half = wp.tan(0.5 * lamp_size[l][0])
             vis = float(0.0)
             if tan_half <= 0.0:
-                vis = _visible(mesh, origin, origin + w * far)
+                vis = visible(mesh, origin, origin + w * far)
                 nrays += 1
             else:
                 t1, t2 = tangent_frame(w)
                 for k in range(count):
-                    st = _stratum(k, side, wp.randf(state), wp.randf(state))
-                    ws = wp.normalize(w + _disk(st, t1, t2, tan_half, tan_half))
-                    vis += _visible(mesh, origin, origin + ws * far)
+                    ws = wp.normalize(w + _disk(sample2d(k, count, rot), t1, t2, tan_half, tan_half))
+                    vis += visible(mesh, origin, origin + ws * far)
                 vis = vis / float(count)
                 nrays += count
             total += power * (vis * cos_r / 3.141592653589793)
@@ -222,7 +216,7 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
                 continue
             acc = wp.vec2(0.0, 0.0)
             for k in range(count):
-                st = _stratum(k, side, wp.randf(state), wp.randf(state))
+                st = sample2d(k, count, rot)
                 q = c + _disk(st, lamp_u[l], lamp_v[l], hx, hy)
                 if ell == 0:
                     q = c + lamp_u[l] * (hx * (2.0 * st[0] - 1.0)) + lamp_v[l] * (hy * (2.0 * st[1] - 1.0))
@@ -242,9 +236,10 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
         ff = triangle_ff(p, n, a, b, c2)
         if ff <= 0.0:
             continue
+        rot = wp.vec2(wp.randf(state), wp.randf(state))
         acc = wp.vec2(0.0, 0.0)
         for k in range(count):
-            st = _stratum(k, side, wp.randf(state), wp.randf(state))
+            st = sample2d(k, count, rot)
             r = wp.sqrt(st[0])
             q = a * (1.0 - r) + b * (r * (1.0 - st[1])) + c2 * (r * st[1])
             acc += _weighted_visibility(mesh, origin, p, n, q, nt)
@@ -256,28 +251,29 @@ def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3)
     rays[i] = nrays
 
 
-def direct_lighting(geometry: SceneGeometry, scene: SceneData, points: np.ndarray,
-                    normals: np.ndarray, settings, dev: device_mod.Device,
+def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,
                     progress: Optional[Callable[[float], None]] = None):
-    """Direct lighting at receivers.
+    """Direct lighting at receivers of ``problem`` (a ``core.problem.Problem``: its BVH, lights,
+    device and ``settings.light_samples``).
 
-    points, normals: float32[N,3] world positions (m) and unit normals of the receivers.
-    Returns (float32[N,3] lighting = irradiance/π, number of shadow rays traced).
-    ``settings.light_samples`` is rounded down to a square (stratified grid) of at least 1.
+    points, normals: float32[N,3] positions (m, the problem's frame) and unit normals; sizes:
+    float32[N] local feature size (m) for the ray offset. Returns (float32[N,3] lighting =
+    irradiance/π, number of shadow rays traced).
     """
     n = int(points.shape[0])
+    dev = problem.device
     d = dev.name
-    side = max(1, int(math.isqrt(int(settings.light_samples))))
     pts = wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d)
-    nrm = wp.array(_unit(normals), dtype=wp.vec3, device=d)
+    nrm = wp.array(unit(normals), dtype=wp.vec3, device=d)
+    size = wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d)
     out = wp.zeros(n, dtype=wp.vec3, device=d)
     rays = wp.zeros(n, dtype=wp.int32, device=d)
-    g = geometry
+    g = problem.lights
     device_mod.launch(
         _direct_kernel, n,
-        [g.mesh.id, pts, nrm, g.lamp_kind, g.lamp_pos, g.lamp_dir, g.lamp_u, g.lamp_v, g.lamp_size,
-         g.lamp_shape, g.lamp_power, g.lamp_cos_half, g.lamp_smooth, g.em_v0, g.em_v1, g.em_v2,
-         g.em_radiance, side, g.eps, g.far, int(settings.seed), ELLIPSE_SIDES,
-         float(ELLIPSE_SCALE), out, rays],
+        [problem.mesh.id, pts, nrm, size, g.lamp_kind, g.lamp_pos, g.lamp_dir, g.lamp_u, g.lamp_v,
+         g.lamp_size, g.lamp_shape, g.lamp_power, g.lamp_cos_half, g.lamp_smooth, g.em_v0, g.em_v1,
+         g.em_v2, g.em_radiance, int(problem.settings.light_samples), problem.far,
+         int(problem.settings.seed), ELLIPSE_SIDES, float(ELLIPSE_SCALE), out, rays],
         dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
     return out.numpy().astype(np.float32), int(rays.numpy().astype(np.int64).sum())

@@ -1,6 +1,12 @@
-"""Surface elements: one oriented disk per shading vertex (Bunnell).
+"""Shading vertices and surface elements.
 
-The front face (along the normal) emits and reflects; the back face casts shadow only.
+A *shading vertex* is a mesh vertex with one shading normal: a vertex whose triangle corners carry
+different normals (a hard edge) is split into one shading vertex per distinct normal. Results for
+color attributes are wanted there.
+
+*Elements* are the unknowns of the solvers: here one oriented disk per shading vertex (Bunnell).
+The front face (along the normal) emits and reflects; the back face casts shadow only. Solvers
+that need other elements map them to receivers through ``core.receivers``.
 """
 from __future__ import annotations
 
@@ -13,17 +19,62 @@ from .scene import SceneData
 # Fraction of the way from a border vertex towards the centre of its triangle fan its receiver
 # point moves.
 NUDGE = 0.01
+# Corner normals are grouped per vertex after rounding to 1/1024 (≈0.06°): corners of a smooth
+# vertex carry the same normal, corners on either side of a hard edge differ by far more.
+NORMAL_STEPS = 1024
+
+
+@dataclass
+class ShadingVertices:
+    """S points where a mesh vertex meets one shading normal.
+
+    position, normal: float32[S,3] (m, unit); vertex: int32[S] the mesh vertex of each;
+    corner: int32[T,3] the shading vertex of each triangle corner (the scene's triangles over
+    shading vertices).
+    """
+
+    position: np.ndarray
+    normal: np.ndarray
+    vertex: np.ndarray
+    corner: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return int(self.position.shape[0])
+
+
+def shading_vertices(scene: SceneData) -> ShadingVertices:
+    """Split ``scene``'s vertices where their triangle corners' normals differ."""
+    t = scene.num_triangles
+    corner_vertex = scene.triangles.reshape(-1).astype(np.int64)
+    normals = np.nan_to_num(np.asarray(scene.corner_normals, np.float32).reshape(-1, 3))
+    q = np.rint(normals * NORMAL_STEPS).astype(np.int64) + NORMAL_STEPS
+    if scene.num_vertices < 1 << 27:  # vertex index and three 12-bit normal components fit one int64
+        key = (corner_vertex << 36) | (q[:, 0] << 24) | (q[:, 1] << 12) | q[:, 2]
+        _, first, corner = np.unique(key, return_index=True, return_inverse=True)
+    else:
+        _, first, corner = np.unique(np.column_stack([corner_vertex, q]), axis=0, return_index=True,
+                                     return_inverse=True)
+    vertex = corner_vertex[first].astype(np.int32)
+    n = normals[first].astype(np.float64)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.where(length > 0, n / np.where(length > 0, length, 1.0), (0.0, 0.0, 1.0))
+    return ShadingVertices(position=np.ascontiguousarray(scene.positions[vertex], np.float32),
+                           normal=n.astype(np.float32), vertex=vertex,
+                           corner=corner.reshape(t, 3).astype(np.int32))
 
 
 @dataclass
 class Elements:
-    """n disks.
+    """n disks, one per shading vertex.
 
     position, normal: float32[n,3] (m, unit); a vertex on the border of its surface is moved 1 %
-    towards the centre of its triangle fan (see NUDGE). area: float32[n] (m²), a third of the adjacent
-    triangles' area. albedo, emission: float32[n,3], area-weighted means over adjacent triangles
-    (emission in radiance units). fan_offsets: int32[n+1] and fan_triangles: int32[3T] list, per
-    element, the triangles it is a corner of (CSR), for exact near-field form factors.
+    towards the centre of its triangle fan (see NUDGE). area: float32[n] (m²), a third of the
+    adjacent triangles' area. albedo, emission: float32[n,3], area-weighted means over adjacent
+    triangles (emission in radiance units). vertex: int32[n] the mesh vertex each sits on.
+    fan_offsets: int32[n+1] and fan_triangles: int32[3T] list, per element, the triangles it is a
+    corner of (CSR), for exact near-field form factors. corner: int32[T,3] the element of each
+    triangle corner.
     """
 
     position: np.ndarray
@@ -31,20 +82,23 @@ class Elements:
     area: np.ndarray
     albedo: np.ndarray
     emission: np.ndarray
+    vertex: np.ndarray
     fan_offsets: np.ndarray
     fan_triangles: np.ndarray
+    corner: np.ndarray
 
     @property
     def count(self) -> int:
         return int(self.position.shape[0])
 
 
-def build(scene: SceneData) -> Elements:
-    """Elements of ``scene``'s shading vertices; vertices in no triangle get zero area."""
-    n = scene.num_vertices
-    tris = scene.triangles
-    tri_area = scene.triangle_areas().astype(np.float64)
-    tri_area = np.where(np.isfinite(tri_area), tri_area, 0.0)
+def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:
+    """One disk per shading vertex of ``scene`` (split here unless given); vertices in no triangle
+    with area get zero area."""
+    shading = shading if shading is not None else shading_vertices(scene)
+    n = shading.count
+    tris = shading.corner
+    tri_area = scene.triangle_areas()
     corners = tris.reshape(-1)
     share = np.repeat(tri_area / 3.0, 3)
     area = np.bincount(corners, weights=share, minlength=n)
@@ -57,15 +111,22 @@ def build(scene: SceneData) -> Elements:
     # Receivers on the border of their surface move a hair into their fan: a floor vertex on the
     # edge where a wall stands lies in the wall's plane and would see it edge-on (F = 0), while
     # the lighting there is the limit from the surface's interior (what Cycles' offset rays see).
-    # Interior vertices stay put, so closed and curved surfaces are untouched.
-    p = scene.positions.astype(np.float64)
+    # They move towards the centre of their largest triangle, so they stay in its plane (on a
+    # curved fan a point between the planes would see its own triangles from behind). Interior
+    # vertices stay put, so closed and curved surfaces are untouched.
+    p = shading.position.astype(np.float64)
     edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
     uniq, uses = np.unique(edges, axis=0, return_counts=True)
     border = np.zeros(n, bool)
     border[uniq[uses == 1].ravel()] = True
     border &= area > 0
     position = p.copy()
-    position[border] += NUDGE * (weighted(p[tris].mean(axis=1))[border] - p[border])
+    # the largest triangle of each vertex: sort corners by triangle area, the last write wins
+    by_area = np.argsort(share, kind="stable")
+    largest = np.zeros(n, np.int64)
+    largest[corners[by_area]] = by_area // 3
+    centre = p[tris[largest]].mean(axis=1)
+    position[border] += NUDGE * (centre[border] - p[border])
 
     order = np.argsort(corners, kind="stable")
     fan_triangles = (order // 3).astype(np.int32)
@@ -73,10 +134,12 @@ def build(scene: SceneData) -> Elements:
     np.cumsum(np.bincount(corners, minlength=n), out=fan_offsets[1:])
     return Elements(
         position=position.astype(np.float32),
-        normal=np.ascontiguousarray(scene.normals, np.float32),
+        normal=shading.normal,
         area=area.astype(np.float32),
         albedo=weighted(scene.albedo).astype(np.float32),
         emission=weighted(scene.emission).astype(np.float32),
+        vertex=shading.vertex,
         fan_offsets=fan_offsets,
         fan_triangles=fan_triangles,
+        corner=tris,
     )

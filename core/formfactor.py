@@ -10,6 +10,10 @@ INV_TWO_PI = 0.15915494309189535
 # distance: a sender in the receiver's own plane (a neighbouring triangle of a flat wall) is seen
 # edge-on and contributes nothing.
 HORIZON_EPS = 1.0e-5
+# A triangle counts for a point only if the point lies off its plane by more than this fraction of
+# the triangle's size plus their distance: a point on the triangle itself (a receiver on its own
+# surface, up to rounding) sees it edge-on, whichever side the rounding puts it.
+PLANE_EPS = 1.0e-5
 # Outline shapes (outline_point); rectangle and ellipse match core.scene's SHAPE_* codes.
 OUTLINE_RECTANGLE, OUTLINE_ELLIPSE, OUTLINE_TRIANGLE = 0, 1, 2
 
@@ -70,7 +74,8 @@ def fan_ff(p: wp.vec3, n: wp.vec3, j: int, side: float, fan_offsets: wp.array(dt
         c = points[tris[3 * t + 2]]
         nt = wp.cross(b - a, c - a)
         h = side * wp.dot(p - a, nt)
-        if h > 1.0e-6 * wp.length(nt) * wp.length(p - a):
+        lnt = wp.length(nt)
+        if h > PLANE_EPS * lnt * (wp.length(p - a) + wp.sqrt(lnt)):
             s += triangle_ff(p, n, a, b, c)
     return s / 3.0
 

@@ -23,48 +23,52 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .elements import Elements
+from .problem import Surfels
 
 MORTON_BITS = 10  # per axis: 30-bit codes
 # Levels of the tree at most: the leaves and one per Morton bit (the traversal keeps a weight per level).
 MAX_LEVELS = MORTON_BITS + 1
 
 
-@dataclass
-class Hierarchy:
-    """m nodes over n element disks, all Warp arrays on ``device``.
+@wp.struct
+class Nodes:
+    """The m nodes over n element disks, as kernels read them (one array each, node order).
 
-    position: vec3[m] (m), normal: vec3[m] unit area-weighted mean normal, spread: float32[m] length
-    of the area-weighted mean of the unit normals (1 for a leaf), area: float32[m] (m²), radius:
-    float32[m] (m) bounding radius of the subtree's disks around ``position`` (a leaf: √(area/π)),
-    leaves: float32[m] number of disks in the subtree,
-    first_child: int32[m] (−1 for a leaf; the children are first_child … up to the next node's
-    first child, or the level's end), descend: int32[m] the child a traversal opening the node goes
-    to (its first child, past cells with a single child, which repeat their child's disk; −1 for a
-    leaf), parent: int32[m] (−1 for the root), next: int32[m] (−1:
-    traversal ends), level: int32[m] (0 for leaves), element: int32[m] the element of a leaf (−1
-    for inner nodes), order: int32[n] the elements in leaf order (kept for refits). tri_points:
-    vec3[V] and tri_indices: int32[3T], the scene's triangles (shared with
-    ``direct.SceneGeometry``), for exact near-field form factors.
-    level_offsets: numpy int64[L+1], nodes of level l are level_offsets[l] … level_offsets[l+1]−1;
-    root = m − 1.
+    position: vec3[m] (m); normal: vec3[m] unit area-weighted mean normal; spread: float32[m] length
+    of the area-weighted mean of the unit normals (1 for a leaf); area: float32[m] (m²); radius:
+    float32[m] (m) bounding radius of the subtree's disks around ``position`` (a leaf: √(area/π));
+    leaves: float32[m] number of disks in the subtree; first_child: int32[m] (−1 for a leaf; the
+    children are first_child … up to the next node's first child, or the level's end); descend:
+    int32[m] the child a traversal opening the node goes to (its first child, past cells with a
+    single child, which repeat their child's disk; −1 for a leaf); parent: int32[m] (−1 for the
+    root); next: int32[m] where a traversal goes when the node's subtree is done (−1: the end);
+    level: int32[m] (0 for leaves); element: int32[m] the element of a leaf (−1 for inner nodes);
+    root: the root's index (m − 1).
     """
 
-    position: wp.array
-    normal: wp.array
-    spread: wp.array
-    area: wp.array
-    radius: wp.array
-    leaves: wp.array
-    first_child: wp.array
-    descend: wp.array
-    parent: wp.array
-    next: wp.array
-    level: wp.array
-    element: wp.array
+    position: wp.array(dtype=wp.vec3)
+    normal: wp.array(dtype=wp.vec3)
+    spread: wp.array(dtype=wp.float32)
+    area: wp.array(dtype=wp.float32)
+    radius: wp.array(dtype=wp.float32)
+    leaves: wp.array(dtype=wp.float32)
+    first_child: wp.array(dtype=wp.int32)
+    descend: wp.array(dtype=wp.int32)
+    parent: wp.array(dtype=wp.int32)
+    next: wp.array(dtype=wp.int32)
+    level: wp.array(dtype=wp.int32)
+    element: wp.array(dtype=wp.int32)
+    root: int
+
+
+@dataclass
+class Tree:
+    """A cluster tree: ``nodes`` (the ``Nodes`` struct on ``device``), ``order`` int32[n] the
+    elements in leaf order (kept for refits) and ``level_offsets`` numpy int64[L+1] (nodes of
+    level l are level_offsets[l] … level_offsets[l+1]−1; the root is the last node)."""
+
+    nodes: Nodes
     order: wp.array
-    tri_points: wp.array
-    tri_indices: wp.array
     level_offsets: np.ndarray
     device: device_mod.Device
 
@@ -98,22 +102,17 @@ def _morton_kernel(offset: int, pos: wp.array(dtype=wp.vec3), lo: wp.vec3, inv_e
 
 
 @wp.kernel
-def _leaf_kernel(offset: int, order: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3),
-                 nrm: wp.array(dtype=wp.vec3), area: wp.array(dtype=wp.float32),
-                 n_pos: wp.array(dtype=wp.vec3), n_nrm: wp.array(dtype=wp.vec3),
-                 n_spread: wp.array(dtype=wp.float32), n_area: wp.array(dtype=wp.float32),
-                 n_radius: wp.array(dtype=wp.float32), n_leaves: wp.array(dtype=wp.float32),
-                 n_element: wp.array(dtype=wp.int32)):
+def _leaf_kernel(offset: int, order: wp.array(dtype=wp.int32), s: Surfels, t: Nodes):
     k = wp.tid() + offset
     e = order[k]
-    a = wp.max(area[e], 0.0)
-    n_pos[k] = pos[e]
-    n_nrm[k] = nrm[e]
-    n_spread[k] = 1.0
-    n_area[k] = a
-    n_radius[k] = wp.sqrt(a / 3.141592653589793)
-    n_leaves[k] = 1.0
-    n_element[k] = e
+    a = wp.max(s.area[e], 0.0)
+    t.position[k] = s.pos[e]
+    t.normal[k] = s.nrm[e]
+    t.spread[k] = 1.0
+    t.area[k] = a
+    t.radius[k] = wp.sqrt(a / 3.141592653589793)
+    t.leaves[k] = 1.0
+    t.element[k] = e
 
 
 @wp.func
@@ -124,15 +123,17 @@ def _child_end(node: int, level_end: int, child_level_end: int, first_child: wp.
 
 
 @wp.kernel
-def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
-                  n_pos: wp.array(dtype=wp.vec3), n_nrm: wp.array(dtype=wp.vec3),
-                  n_spread: wp.array(dtype=wp.float32), n_area: wp.array(dtype=wp.float32),
-                  n_radius: wp.array(dtype=wp.float32), n_leaves: wp.array(dtype=wp.float32),
-                  first_child: wp.array(dtype=wp.int32)):
+def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int, t: Nodes):
     """Disk of node node0 + k from its children's disks."""
     node = node0 + wp.tid() + offset
-    c0 = first_child[node]
-    c1 = _child_end(node, level_end, child_level_end, first_child)
+    n_pos = t.position
+    n_nrm = t.normal
+    n_spread = t.spread
+    n_area = t.area
+    n_radius = t.radius
+    n_leaves = t.leaves
+    c0 = t.first_child[node]
+    c1 = _child_end(node, level_end, child_level_end, t.first_child)
     total = float(0.0)
     count = float(0.0)
     centre = wp.vec3(0.0)
@@ -223,21 +224,19 @@ def _next_kernel(offset: int, node0: int, level_end: int, parent: wp.array(dtype
         next_node[g] = next_node[p]
 
 
-def build(els: Elements, dev: device_mod.Device, geometry) -> Hierarchy:
-    """The tree over ``els``' disks (positions, normals, areas); needs at least one element.
-
-    geometry: the scene's ``direct.SceneGeometry`` (its ``points`` and ``indices`` are kept by
-    reference: after moving vertices update them there and :func:`refit`).
-    """
+def build(problem) -> Tree:
+    """The tree over the elements of ``problem`` (a ``core.problem.Problem``): its disks are read
+    from the device copy (``problem.surfels``); needs at least one element."""
+    els, dev = problem.elements, problem.device
     n = els.count
     if n < 1:
-        raise ValueError("a hierarchy needs at least one element")
+        raise ValueError("a tree needs at least one element")
     d = dev.name
     lo = els.position.min(axis=0).astype(np.float32)
     extent = float((els.position.max(axis=0) - lo).max())
     keys = wp.empty(2 * n, dtype=wp.int32, device=d)
     order = wp.empty(2 * n, dtype=wp.int32, device=d)
-    device_mod.launch(_morton_kernel, n, [wp.array(els.position, dtype=wp.vec3, device=d), wp.vec3(lo),
+    device_mod.launch(_morton_kernel, n, [problem.surfels.pos, wp.vec3(lo),
                                           1.0 / extent if extent > 0 else 0.0, keys, order], dev)
     wp.utils.radix_sort_pairs(keys, order, n)
 
@@ -261,73 +260,54 @@ def build(els: Elements, dev: device_mod.Device, geometry) -> Hierarchy:
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     m = int(offsets[-1])
 
-    def vec3s():
-        return wp.empty(m, dtype=wp.vec3, device=d)
-
-    def floats():
-        return wp.empty(m, dtype=wp.float32, device=d)
-
-    def indices(fill):
-        return wp.full(m, fill, dtype=wp.int32, device=d)
-
-    h = Hierarchy(position=vec3s(), normal=vec3s(), spread=floats(), area=floats(), radius=floats(),
-                  leaves=floats(), first_child=indices(-1), descend=indices(-1), parent=indices(-1),
-                  next=indices(-1), level=indices(0), element=indices(-1), order=order[:n],
-                  tri_points=geometry.points, tri_indices=geometry.indices, level_offsets=offsets,
-                  device=dev)
+    t = Nodes()
+    t.position, t.normal = (wp.empty(m, dtype=wp.vec3, device=d) for _ in range(2))
+    t.spread, t.area, t.radius, t.leaves = (wp.empty(m, dtype=wp.float32, device=d) for _ in range(4))
+    t.first_child, t.descend, t.parent, t.next, t.element = (wp.full(m, -1, dtype=wp.int32, device=d)
+                                                             for _ in range(5))
+    t.level = wp.zeros(m, dtype=wp.int32, device=d)
+    t.root = m - 1
     for lv, (parent_local, first_local) in enumerate(links, start=1):
         device_mod.launch(_place_kernel, sizes[lv - 1],
                           [int(offsets[lv - 1]), int(offsets[lv]), parent_local, first_local, sizes[lv],
-                           h.parent, h.first_child, h.level, lv], dev)
+                           t.parent, t.first_child, t.level, lv], dev)
     for lv in range(1, len(sizes)):
         device_mod.launch(_descend_kernel, sizes[lv],
-                          [int(offsets[lv]), int(offsets[lv + 1]), int(offsets[lv]), h.first_child,
-                           h.descend],
+                          [int(offsets[lv]), int(offsets[lv + 1]), int(offsets[lv]), t.first_child,
+                           t.descend],
                           dev)
     for lv in range(len(sizes) - 2, -1, -1):
         device_mod.launch(_next_kernel, sizes[lv],
-                          [int(offsets[lv]), int(offsets[lv + 1]), h.parent, h.next],
+                          [int(offsets[lv]), int(offsets[lv + 1]), t.parent, t.next],
                           dev)
-    _aggregate(h, els.position, els.normal, els.area)
-    return h
+    tree = Tree(nodes=t, order=order[:n], level_offsets=offsets, device=dev)
+    refit(tree, problem.surfels)
+    return tree
 
 
-def refit(h: Hierarchy, positions: np.ndarray, normals: np.ndarray, areas: np.ndarray) -> Hierarchy:
-    """Recompute ``h``'s node disks in place for moved elements (same elements, same topology).
-
-    positions, normals: float32[n,3]; areas: float32[n]. The Morton order is kept, so a large motion
-    leaves looser (slower, still correct) clusters: rebuild then.
-    """
-    _aggregate(h, positions, normals, areas)
-    return h
-
-
-def _aggregate(h: Hierarchy, positions, normals, areas) -> None:
-    dev = h.device
-    d = dev.name
-    offs = h.level_offsets
-    device_mod.launch(_leaf_kernel, int(offs[1]),
-                      [h.order,
-                       wp.array(np.ascontiguousarray(positions, np.float32), dtype=wp.vec3, device=d),
-                       wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
-                       wp.array(np.ascontiguousarray(areas, np.float32), dtype=wp.float32, device=d),
-                       h.position, h.normal, h.spread, h.area, h.radius, h.leaves, h.element], dev)
+def refit(tree: Tree, surfels) -> Tree:
+    """Recompute ``tree``'s node disks in place from the elements' disks in ``surfels``
+    (``core.problem.Surfels``, updated by the caller for moved elements: same elements, same
+    topology). The Morton order is kept, so a large motion leaves looser (slower, still correct)
+    clusters: rebuild then."""
+    dev = tree.device
+    offs = tree.level_offsets
+    device_mod.launch(_leaf_kernel, int(offs[1]), [tree.order, surfels, tree.nodes], dev)
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_merge_kernel, int(offs[lv + 1] - offs[lv]),
-                          [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), h.position, h.normal,
-                           h.spread, h.area, h.radius, h.leaves, h.first_child], dev)
+                          [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), tree.nodes], dev)
+    return tree
 
 
 @wp.kernel
-def _mean_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
-                 first_child: wp.array(dtype=wp.int32), n_area: wp.array(dtype=wp.float32),
+def _mean_kernel(offset: int, node0: int, level_end: int, child_level_end: int, t: Nodes,
                  values: wp.array(dtype=wp.vec3)):
     node = node0 + wp.tid() + offset
     total = float(0.0)
     acc = wp.vec3(0.0)
-    for c in range(first_child[node], _child_end(node, level_end, child_level_end, first_child)):
-        total += n_area[c]
-        acc += values[c] * n_area[c]
+    for c in range(t.first_child[node], _child_end(node, level_end, child_level_end, t.first_child)):
+        total += t.area[c]
+        acc += values[c] * t.area[c]
     if total > 0.0:
         acc = acc / total
     values[node] = acc
@@ -340,21 +320,21 @@ def _scatter_kernel(offset: int, element: wp.array(dtype=wp.int32), per_element:
     values[k] = per_element[element[k]]
 
 
-def node_means(h: Hierarchy, per_element: np.ndarray, out: wp.array | None = None) -> wp.array:
+def node_means(tree: Tree, per_element: np.ndarray, out: wp.array | None = None) -> wp.array:
     """vec3[m]: area-weighted mean of ``per_element`` (float32[n,3]) over each node's subtree.
 
     ``out`` (vec3[m]) is reused when given, so repeated calls in one bake allocate nothing new.
     """
-    dev = h.device
+    dev = tree.device
     d = dev.name
     if out is None:
-        out = wp.empty(h.count, dtype=wp.vec3, device=d)
-    offs = h.level_offsets
+        out = wp.empty(tree.count, dtype=wp.vec3, device=d)
+    offs = tree.level_offsets
     device_mod.launch(_scatter_kernel, int(offs[1]),
-                      [h.element,
+                      [tree.nodes.element,
                        wp.array(np.ascontiguousarray(per_element, np.float32), dtype=wp.vec3, device=d),
                        out], dev)
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_mean_kernel, int(offs[lv + 1] - offs[lv]),
-                          [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), h.first_child, h.area, out], dev)
+                          [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), tree.nodes, out], dev)
     return out

@@ -1,29 +1,37 @@
-"""The one orchestrator: SceneData + Settings -> BakeResult, for the operator, the CLI and the tests."""
+"""The one orchestrator: SceneData + Settings -> BakeResult, for the operator, the CLI and the tests.
+
+It builds the problem, dispatches once to the chosen solver through the registry, and evaluates
+the solution at the receivers asked for (shading vertices; lightmap texels), composing the content
+the same way for both.
+"""
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field, replace
-from functools import partial
+from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 import numpy as np
 
+from . import receivers as receivers_mod
+from . import solvers
 from .errors import BakeCancelled, BakeError
+from .problem import Problem
 from .scene import SceneData
-from .settings import Settings
+from .settings import Settings, flag
+from .stages import ProgressFn, Stages
 
-
-ProgressFn = Callable[[str, float], None]
+__all__ = ["BakeResult", "BakeCancelled", "BakeError", "bake"]
 
 
 @dataclass
 class BakeResult:
-    """Per-shading-vertex results, all float32[V,3] in linear RGB (radiance units, W m⁻² sr⁻¹).
+    """Per-shading-vertex results, all float32[S,3] in linear RGB (radiance units, W m⁻² sr⁻¹).
 
     lighting: irradiance/π at the shading normal (direct + indirect).
     direct, indirect: its two parts.
     output: the content the settings asked for (lighting, combined, indirect or ao: accessibility
     in all three channels).
+    corner_vertex: int32[T,3], the shading vertex of each scene triangle corner (where a mesh
+    vertex's corners get their values).
     timings: seconds per stage; counts: objects, triangles, elements, lamps, rays, pairs, iterations.
     lightmap: the lightmap pages (``core.lightmap.LightmapResult``) when a lightmap was requested.
     """
@@ -32,6 +40,7 @@ class BakeResult:
     direct: np.ndarray
     indirect: np.ndarray
     output: np.ndarray
+    corner_vertex: np.ndarray
     device: str
     timings: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
@@ -40,134 +49,45 @@ class BakeResult:
     lightmap: object = None
 
 
-class _Stages:
-    """Times stages, forwards progress, and checks cancellation between launches."""
-
-    def __init__(self, progress: Optional[ProgressFn], cancel):
-        self._progress = progress
-        self._cancel = cancel
-        self.timings: dict[str, float] = {}
-
-    def check(self) -> None:
-        if self._cancel is not None and self._cancel.is_set():
-            raise BakeCancelled("bake cancelled")
-
-    def report(self, stage: str, fraction: float) -> None:
-        self.check()
-        if self._progress is not None:
-            self._progress(stage, float(fraction))
-
-    def run(self, stage: str, fn, *args, **kwargs):
-        self.report(stage, 0.0)
-        t0 = time.perf_counter()
-        out = fn(*args, **kwargs)
-        self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t0
-        self.report(stage, 1.0)
-        return out
-
-
 def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = None,
-         cancel=None, lightmap=None) -> BakeResult:
+         cancel=None, lightmap=None, notify: Optional[Callable[[str], None]] = None) -> BakeResult:
     """Bake ``scene`` with ``settings``.
 
     progress(stage, fraction) is called as stages advance; ``cancel`` is an object with ``is_set()``
     (e.g. threading.Event) checked between kernel launches: when set, BakeCancelled is raised.
+    notify(message) hears each warning as it arises (a long bake is announced before it runs).
     Raises BakeError (clear message) for input that cannot be baked.
     lightmap: a ``core.lightmap.LightmapRequest``: its objects are also unwrapped, rasterised and
-    lit per texel (direct light with shadow rays per texel, indirect interpolated from the
-    solution, with the detail of a final gather over the hierarchy when ``texel_indirect`` is
-    ``gather``) into ``BakeResult.lightmap``.
+    evaluated per texel into ``BakeResult.lightmap``.
     """
-    from . import device as device_mod
-    from . import direct, elements, hierarchy
-    from .solvers import ao, bunnell, reference
+    stages = Stages(progress, cancel, notify)
+    for name in settings.unread():
+        stages.warn(f"{flag(name)} is not used by method {settings.solver}")
+    problem = Problem(scene, settings, stages)
+    info = solvers.SOLVERS[settings.solver]
+    solver = solvers.get(settings.solver)
+    for message in getattr(solver, "check", lambda p: [])(problem):
+        stages.warn(message)
+    solution = stages.run("solve", solver.solve, problem)
+    problem.counts["rays"] += int(solution.counts.get("rays", 0))
+    problem.counts.update({k: v for k, v in solution.counts.items() if k != "rays"})
 
-    settings.validate()
-    if settings.ao_distance == 0.0:  # 0 stands for the scene world's AO distance
-        settings = replace(settings, ao_distance=float(scene.ao_distance))
-    try:
-        scene.validate()
-    except ValueError as exc:
-        raise BakeError(str(exc)) from None
-    if scene.num_triangles == 0:
-        raise BakeError("nothing to bake: the scene has no triangles")
-
-    stages = _Stages(progress, cancel)
-    dev = stages.run("device", device_mod.select, settings.device)
-    warnings = []
-    areas = scene.triangle_areas()
-    degenerate = ~(areas > 0)
-    if degenerate.any():
-        names = sorted({scene.object_names[i] for i in np.unique(scene.tri_object[degenerate])})
-        warnings.append(f"{int(degenerate.sum())} zero-area triangles ignored in {', '.join(names)}")
-    els = stages.run("elements", elements.build, scene)
-    geometry = stages.run("bvh", direct.SceneGeometry, scene, dev)
-
-    def direct_progress(f):
-        stages.report("direct", f)
-
-    if settings.content == "ao":  # AO needs no light
-        lit_direct, direct_rays = np.zeros((els.count, 3), np.float32), 0
-    else:
-        lit_direct, direct_rays = stages.run(
-            "direct", direct.direct_lighting, geometry, scene, els.position, els.normal, settings,
-            dev, direct_progress)
-    counts = {"objects": len(scene.object_names), "triangles": scene.num_triangles,
-              "vertices": scene.num_vertices, "elements": els.count, "lamps": len(scene.lamps),
-              "emissive_triangles": int(geometry.num_emitters), "rays": int(direct_rays)}
-    # The lightmap's final gather needs the tree too (and light to gather: not for AO or direct).
-    texel_gather = (lightmap is not None and settings.texel_indirect == "gather"
-                    and settings.content != "ao" and settings.solver != "direct")
-    hier = None
-    if settings.content == "ao" or settings.solver == "bunnell" or texel_gather:
-        hier = stages.run("hierarchy", hierarchy.build, els, dev, geometry)
-        counts["nodes"] = hier.count
-
-    solvers = {"reference": reference.solve, "bunnell": partial(bunnell.solve, hier=hier)}
-    if settings.content != "ao" and settings.solver in solvers:  # AO needs no light transport
-        def solve_progress(stage, f):
-            stages.report(stage, f)
-
-        solution = stages.run("solve", solvers[settings.solver], geometry, els, lit_direct, settings,
-                              dev, solve_progress)
-        indirect = solution.indirect
-        solver_counts = dict(solution.counts)
-        counts["rays"] += int(solver_counts.pop("rays", 0))
-        counts.update(solver_counts)
-    else:
-        indirect = np.zeros_like(lit_direct)
+    vertices = receivers_mod.at_elements(problem)
+    none = np.zeros((len(vertices), 3), np.float32)
+    direct = problem.direct if info.light else none  # AO needs no light
+    field_values = solver.evaluate(problem, solution, vertices)
+    indirect = field_values if info.light else none
+    output = receivers_mod.compose(settings.baked_content, field_values, direct, vertices)
 
     lightmap_result = None
     if lightmap is not None:
         from .lightmap import bake_lightmaps
 
-        def texel_ao(points, normals):
-            access = stages.run("texel ao", ao.accessibility, hier, els, points, normals, settings,
-                                dev, lambda f: stages.report("texel ao", f))
-            return {"ao": np.repeat(access[:, None], 3, axis=1)}
-
-        per_vertex, gather = {"indirect": indirect}, None
-        if texel_gather:
-            gather = stages.run("final gather", bunnell.final_gather, hier, els, lit_direct + indirect,
-                                geometry, dev)
-            per_vertex["gathered"] = stages.run("final gather", gather, els.position, els.normal)
-        lightmap_result = bake_lightmaps(lightmap, scene, geometry, per_vertex, settings, dev, stages,
-                                         texel_ao if settings.content == "ao" else None, gather)
-        warnings += lightmap_result.warnings
-        counts["texels"] = lightmap_result.texels
-
-    lighting = lit_direct + indirect
-    if settings.content == "ao":
-        access = stages.run("ao", ao.accessibility, hier, els, els.position, els.normal, settings, dev,
-                            lambda f: stages.report("ao", f))
-        output = np.repeat(access[:, None], 3, axis=1)
-    else:
-        output = {"lighting": lighting,
-                  "combined": els.emission + els.albedo * lighting,
-                  "indirect": indirect}[settings.content]
-    return BakeResult(lighting=lighting.astype(np.float32), direct=lit_direct.astype(np.float32),
-                      indirect=indirect.astype(np.float32), output=output.astype(np.float32),
-                      device=dev.name, timings=stages.timings, counts=counts, warnings=warnings,
+        lightmap_result = bake_lightmaps(lightmap, problem, solver, solution)
+        problem.counts["texels"] = lightmap_result.texels
+    return BakeResult(lighting=(direct + indirect).astype(np.float32), direct=direct, indirect=indirect,
+                      output=output, corner_vertex=problem.shading.corner, device=problem.device.name,
+                      timings=stages.timings, counts=problem.counts, warnings=stages.warnings,
                       peak_memory_bytes=_peak_rss_bytes(), lightmap=lightmap_result)
 
 

@@ -1,13 +1,16 @@
 """SceneData: what the bake needs of a Blender scene, as plain numpy arrays (no bpy references).
 
-Units: metres, world space. Colours are linear Rec.709 RGB.
-Vertices are *shading vertices*: a mesh vertex whose face corners carry different normals (a hard
-edge) is split into one shading vertex per distinct normal, so each has a single normal; the addon
-keeps the map from Blender face corners back to shading vertices for writing results.
+Units: metres. Colours are linear Rec.709 RGB. Positions are relative to ``origin`` (world =
+origin + position): extraction subtracts a point near the scene in double precision, so a scene
+far from the world origin keeps the float32 precision of one at the origin.
+
+Vertices are mesh vertices; each triangle corner carries its own shading normal. Splitting a vertex
+whose corners carry different normals (a hard edge) into shading vertices is core's job
+(``core.elements.shading_vertices``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -20,7 +23,7 @@ class Lamps:
     """L lamps, as Blender defines them.
 
     kind: int32[L], LAMP_POINT / LAMP_SPOT / LAMP_SUN / LAMP_AREA.
-    position: float32[L,3], world position (m).
+    position: float32[L,3], position (m, relative to the scene's ``origin``).
     direction: float32[L,3], unit vector the lamp points along (its local −Z); sun: towards the scene.
     axis_u, axis_v: float32[L,3], unit local X and Y axes in world space (area lamp extent).
     size: float32[L,2], area: full size along X and Y (m, square/disk repeat it); point/spot: radius
@@ -66,11 +69,11 @@ class Lamps:
 
 @dataclass
 class SceneData:
-    """World-space triangles and lamps of a scene.
+    """Triangles and lamps of a scene.
 
-    positions: float32[V,3] shading-vertex positions (m).
-    normals: float32[V,3] unit shading normals.
-    triangles: int32[T,3] shading-vertex indices, counter-clockwise seen from the front.
+    positions: float32[V,3] mesh-vertex positions (m, relative to ``origin``).
+    triangles: int32[T,3] vertex indices, counter-clockwise seen from the front.
+    corner_normals: float32[T,3,3] unit shading normal of each triangle corner.
     tri_object: int32[T] index into ``object_names`` of the object each triangle came from.
     albedo: float32[T,3] diffuse reflectance in [0,1].
     emission: float32[T,3] emitted radiance (W m⁻² sr⁻¹, Blender's Emission Strength × Color),
@@ -79,17 +82,19 @@ class SceneData:
     object_names: names of the objects (or instances) the triangles came from.
     ao_distance: the world's ambient occlusion distance (m, Blender's world.light_settings.distance):
         occluders farther away do not count.
+    origin: float64[3], the world position positions are relative to.
     """
 
     positions: np.ndarray
-    normals: np.ndarray
     triangles: np.ndarray
+    corner_normals: np.ndarray
     tri_object: np.ndarray
     albedo: np.ndarray
     emission: np.ndarray
     lamps: Lamps
     object_names: list = field(default_factory=list)
     ao_distance: float = 10.0
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def num_vertices(self) -> int:
@@ -100,23 +105,40 @@ class SceneData:
         return int(self.triangles.shape[0])
 
     def triangle_areas(self) -> np.ndarray:
-        """float32[T]: area of each triangle (m²)."""
-        p = self.positions
-        t = self.triangles
-        return 0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1)
+        """float64[T]: area of each triangle (m²); 0 for triangles with non-finite corners."""
+        p = np.asarray(self.positions, np.float64)[self.triangles]
+        finite = np.isfinite(p).all(axis=(1, 2))
+        p = np.where(finite[:, None, None], p, 0.0)
+        return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
 
     def validate(self) -> None:
         """Raise ValueError naming the object for NaN / infinite geometry or inconsistent arrays."""
         v, t = self.num_vertices, self.num_triangles
-        shapes = {"positions": (v, 3), "normals": (v, 3), "triangles": (t, 3), "tri_object": (t,),
-                  "albedo": (t, 3), "emission": (t, 3)}
+        shapes = {"positions": (v, 3), "triangles": (t, 3), "corner_normals": (t, 3, 3),
+                  "tri_object": (t,), "albedo": (t, 3), "emission": (t, 3)}
         for name, shape in shapes.items():
             if getattr(self, name).shape != shape:
                 raise ValueError(f"SceneData.{name} has shape {getattr(self, name).shape}, expected {shape}")
         if t and (self.triangles.min() < 0 or self.triangles.max() >= v):
             raise ValueError("SceneData.triangles index outside positions")
-        bad_v = ~np.isfinite(self.positions).all(axis=1)
+        # Blender stores overflowing coordinates as ±FLT_MAX: as unusable as NaN.
+        limit = np.float32(np.finfo(np.float32).max) / 2
+        with np.errstate(invalid="ignore"):
+            bad_v = ~(np.abs(self.positions) < limit).all(axis=1)
         if bad_v.any():
             bad_t = bad_v[self.triangles].any(axis=1)
             names = sorted({self.object_names[i] for i in np.unique(self.tri_object[bad_t])})
-            raise ValueError(f"non-finite vertex positions in {', '.join(names)}")
+            raise ValueError(f"NaN or infinite vertex positions in {', '.join(names) or 'the scene'}")
+
+    def recentred(self) -> "SceneData":
+        """This scene with positions relative to the centre of its bounding box (computed and
+        subtracted in double precision; ``origin`` moves to match): kernels then work with the
+        coordinates' full float32 precision wherever the scene lies."""
+        p = np.asarray(self.positions, np.float64)
+        if not len(p):
+            return self
+        centre = 0.5 * (p.min(axis=0) + p.max(axis=0))
+        lamps = replace(self.lamps, position=(np.asarray(self.lamps.position, np.float64)
+                                               - centre).astype(np.float32))
+        return replace(self, positions=(p - centre).astype(np.float32), lamps=lamps,
+                       origin=np.asarray(self.origin, np.float64) + centre)

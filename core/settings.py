@@ -1,11 +1,36 @@
-"""One dataclass holds every bake setting; the Blender PropertyGroup and the CLI mirror it."""
+"""Every bake setting, stated once: type, default, range or choices, label and help.
+
+The dataclass :class:`Settings` is what core reads. Each field's metadata (:class:`Option`) is the
+one source the Blender PropertyGroup (``addon/props.py``), the command line (``addon/cli.py``), the
+panel (which greys out what the chosen method does not read) and README's options table
+(:func:`options_markdown`, checked by a test) are made from. Fields are grouped by who reads them:
+``solver`` (light transport), ``lightmap`` (texels, pages, files) and ``output`` (what is written
+and how).
+"""
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+from typing import Optional
 
-METHODS = ("direct", "reference", "bunnell")
+from .errors import SettingsError
+from .solvers import SOLVERS
+
 # Older name of the reference solver, still accepted.
 METHOD_ALIASES = {"bruteforce": "reference"}
+
+
+class _Methods:
+    """The registered solvers and their aliases, read when asked (so a solver registered after
+    import is a valid method)."""
+
+    def __iter__(self):
+        return iter((*SOLVERS, *METHOD_ALIASES))
+
+    def __contains__(self, value) -> bool:
+        return value in SOLVERS or value in METHOD_ALIASES
+
+
+METHODS = _Methods()
 CONTENTS = ("lighting", "combined", "indirect", "ao")
 TARGETS = ("vertex_colors", "lightmap", "both")
 LAYOUTS = ("atlas", "per_object")
@@ -13,107 +38,229 @@ HOOKUPS = ("none", "node", "multiply")
 LIGHTMAP_FORMATS = ("half", "float")
 TEXEL_INDIRECT = ("gather", "interpolate")
 DEVICES = ("auto", "cpu", "cuda")
+GROUPS = ("solver", "lightmap", "output")
+
+# One line per choice, for tooltips and help.
+CHOICE_HELP = {
+    **{name: info.description for name, info in SOLVERS.items()},
+    "lighting": "Light arriving at the surface (irradiance/π), without the surface colour",
+    "combined": "Emission + surface colour × lighting: what the surface looks like",
+    "indirect": "Only the light that bounced off other surfaces",
+    "vertex_colors": "A FLOAT_COLOR point attribute on each mesh",
+    "lightmap": "OpenEXR lightmaps on a 'Lightmap' UV map, loaded as images",
+    "both": "A color attribute and lightmaps",
+    "atlas": "One lightmap shared by all baked objects",
+    "per_object": "One lightmap per object",
+    "none": "Leave materials alone",
+    "node": "Add a UV Map + Image Texture node pair showing the lightmap to each material",
+    "multiply": "Add the node pair and multiply the lightmap into the Base Color",
+    "half": "16-bit float channels (smaller files)",
+    "float": "32-bit float channels",
+    "auto": "The GPU when Warp finds a usable one, else the CPU",
+    "cpu": "The CPU, all cores",
+    "cuda": "An NVIDIA GPU through CUDA",
+    "gather": "The per-vertex solution interpolated, plus the detail a final gather over the "
+              "element tree finds at each texel",
+    "interpolate": "The per-vertex solution interpolated over each triangle",
+}
+CHOICE_HELP["ao"] = ("Ambient occlusion: the unoccluded fraction of the hemisphere within the AO "
+                     "distance, in all three channels (what Cycles' AO bake gives)")
+
+
+@dataclass(frozen=True)
+class Option:
+    """What a setting is, for every place that shows or checks it.
+
+    label: the panel's name; help: one line (the CLI adds the default); group: who reads it
+    (GROUPS); choices: allowed values (None: free); low/high: inclusive bounds (None: open);
+    soft_high: where the panel's slider ends; flag: the command-line option; length: a length in
+    metres (the panel shows units); folder: a folder path.
+    """
+
+    label: str
+    help: str
+    group: str
+    choices: Optional[tuple] = None
+    low: Optional[float] = None
+    high: Optional[float] = None
+    soft_high: Optional[float] = None
+    flag: Optional[str] = None
+    length: bool = False
+    folder: bool = False
+    digits: Optional[int] = None
+
+
+def _option(default, label, help, group, **kwargs):
+    return field(default=default, metadata={"option": Option(label, help, group, **kwargs)})
 
 
 @dataclass
 class Settings:
-    """Bake settings.
+    """Bake settings; see each field's Option (``option(name)``) for its meaning and range."""
 
-    method: ``direct`` (lamps and emissive triangles only) or ``reference`` (all-pairs multi-bounce
-        radiosity with ray-cast visibility, O(n²), small scenes; ``bruteforce`` is the same) or
-        ``bunnell`` (one bounce of indirect light gathered over the disk hierarchy, O(n log n), no
-        rays; approximate, see README).
-    content: ``lighting`` (irradiance/π, Cycles DIFFUSE Direct+Indirect without Color),
-        ``combined`` (emission + albedo × lighting), ``indirect`` (lighting minus direct) or ``ao``
-        (accessibility in [0,1] in all three channels, what Cycles' AO bake gives).
-    target: where results go: ``vertex_colors``, ``lightmap`` (EXR images on a ``Lightmap`` UV map)
-        or ``both``.
-    attribute: name of the color attribute written (only that exact name is ever overwritten).
-    device: ``auto`` (CUDA when usable, else CPU), ``cpu`` or ``cuda``.
-    light_samples: stratified shadow samples per lamp / emissive triangle and receiver (soft shadows).
-    visibility_rays: rays per element pair in the reference gather (jittered over the sender disk).
-    bounces: maximum number of indirect bounces (reference).
-    tolerance: stop iterating when the largest change of indirect lighting, relative to the largest
-        value, falls below this.
-    max_pairs: memory budget of the reference transport, in element pairs (4 bytes each): the whole
-        matrix is kept while n² fits, else rows are recomputed in blocks on each sweep.
-    seed: random seed of sample jitter (results are deterministic for a given seed).
-    bake_copy: when an object's modifiers change its vertex count, bake into a new object
-        ``<name>_baked`` holding the evaluated mesh instead of skipping the object with a message.
-    ao_distance: occluders farther than this (m) do not count for ``ao``; 0: the scene world's AO
-        distance (Blender's default is 10 m).
-    texel_density: lightmap texels per metre of surface (world space).
-    max_size: largest lightmap page side (texels); the density is lowered until the atlas fits.
-    padding: texels between charts (filled by dilation so bilinear filtering shows no seams).
-    layout: ``atlas`` (one lightmap shared by all baked objects) or ``per_object`` (one each).
-    output: folder the EXR lightmaps (and PNG previews) are written to; ``//`` = next to the .blend.
-    hookup: ``none``; ``node`` adds a UV Map + Image Texture node pair to each affected material;
-        ``multiply`` also multiplies the lightmap into the Base Color.
-    reunwrap: make new ``Lightmap`` UVs even where a mesh has them (else they are reused).
-    supersample: texel sub-samples per axis (1: texel centres only).
-    texel_indirect: how a texel gets its indirect light: ``interpolate`` the per-vertex solution
-        over its triangle, or ``gather`` (that, plus the detail a final gather of the solution over
-        the disk hierarchy finds at the texel and not at the triangle's vertices: contact shadows
-        and bleeding finer than the mesh).
-    lightmap_format: EXR channel precision, ``half`` or ``float``.
-    pack_images: pack the lightmap images into the .blend.
-    """
-
-    method: str = "reference"
-    content: str = "lighting"
-    target: str = "vertex_colors"
-    attribute: str = "Lighting"
-    device: str = "auto"
-    light_samples: int = 16
-    visibility_rays: int = 4
-    bounces: int = 64
-    tolerance: float = 1e-4
-    max_pairs: int = 16_000_000
-    seed: int = 1
-    bake_copy: bool = False
-    ao_distance: float = 0.0
-    texel_density: float = 20.0
-    max_size: int = 1024
-    padding: int = 4
-    layout: str = "atlas"
-    output: str = "//lightmaps"
-    hookup: str = "none"
-    reunwrap: bool = False
-    supersample: int = 1
-    texel_indirect: str = "gather"
-    lightmap_format: str = "half"
-    pack_images: bool = False
-
-    def validate(self) -> "Settings":
-        """Raise ValueError with a clear message for an out-of-range setting; return self."""
-        for name, allowed in (("method", METHODS + tuple(METHOD_ALIASES)), ("content", CONTENTS), ("target", TARGETS),
-                              ("device", DEVICES), ("layout", LAYOUTS), ("hookup", HOOKUPS),
-                              ("lightmap_format", LIGHTMAP_FORMATS), ("texel_indirect", TEXEL_INDIRECT)):
-            value = getattr(self, name)
-            if value not in allowed:
-                raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {value!r}")
-        if not self.attribute or not self.attribute.strip():
-            raise ValueError("attribute name must not be empty")
-        for name in ("light_samples", "visibility_rays", "bounces", "max_pairs"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be at least 1, not {getattr(self, name)}")
-        for name, low in (("max_size", 16), ("padding", 1), ("supersample", 1)):
-            if getattr(self, name) < low:
-                raise ValueError(f"{name} must be at least {low}, not {getattr(self, name)}")
-        if not self.texel_density > 0.0:
-            raise ValueError(f"texel_density must be positive, not {self.texel_density}")
-        if self.target != "vertex_colors" and not self.output.strip():
-            raise ValueError("output folder must not be empty when baking lightmaps")
-        if not self.ao_distance >= 0.0:
-            raise ValueError(f"ao_distance must be at least 0, not {self.ao_distance}")
-        if not 0.0 < self.tolerance < 1.0:
-            raise ValueError(f"tolerance must be in (0, 1), not {self.tolerance}")
-        return self
+    method: str = _option("reference", "Method", "how light transport is computed", "solver",
+                          choices=METHODS)
+    content: str = _option("lighting", "Content", "which quantity is baked", "output",
+                           choices=CONTENTS)
+    target: str = _option("vertex_colors", "Target", "where the result is written", "output",
+                          choices=TARGETS)
+    attribute: str = _option("Lighting", "Attribute", "name of the color attribute written, the "
+                             "only one ever overwritten", "output")
+    device: str = _option("auto", "Device", "where the computation runs", "solver", choices=DEVICES)
+    light_samples: int = _option(16, "Light Samples", "shadow samples per lamp / emissive triangle "
+                                 "and receiver (softer, less noisy shadows)", "solver", low=1,
+                                 soft_high=256, flag="--samples")
+    visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair for the "
+                                   "visibility of indirect light", "solver", low=1, high=255,
+                                   soft_high=64, flag="--rays")
+    bounces: int = _option(64, "Bounces", "at most this many indirect bounces (sweeps)", "solver",
+                           low=1, soft_high=128)
+    tolerance: float = _option(1e-4, "Tolerance", "stop bouncing when the largest change, "
+                               "relative to the largest value, is below this", "solver",
+                               low=1e-8, high=0.5, digits=6)
+    max_pairs: int = _option(16_000_000, "Max Pairs", "memory budget of the all-pairs transport, "
+                             "in element pairs at 4 bytes each (the visibility alone takes 1 "
+                             "byte a pair)", "solver", low=1)
+    seed: int = _option(1, "Seed", "random seed of the sample jitter (results are deterministic "
+                        "for a seed)", "solver", low=0)
+    bake_copy: bool = _option(False, "Bake Copy", "when modifiers change an object's vertex count, "
+                              "bake into a new object '<name>_baked' instead of skipping it",
+                              "output")
+    ao_distance: float = _option(0.0, "AO Distance", "occluders farther than this (m) do not count "
+                                 "for AO; 0 uses the world's AO distance", "solver", low=0.0,
+                                 soft_high=100.0, length=True)
+    texel_density: float = _option(20.0, "Texel Density", "lightmap texels per metre of surface",
+                                   "lightmap", low=1e-3, soft_high=1000.0)
+    max_size: int = _option(1024, "Max Size", "largest lightmap side in texels; the density is "
+                            "lowered until the atlas fits", "lightmap", low=16, soft_high=8192)
+    padding: int = _option(4, "Padding", "texels between lightmap charts, filled by dilation",
+                           "lightmap", low=1, soft_high=16)
+    layout: str = _option("atlas", "Layout", "one lightmap for all baked objects or one each",
+                          "lightmap", choices=LAYOUTS)
+    output: str = _option("//lightmaps", "Output", "folder the EXR lightmaps and PNG previews are "
+                          "written to ('//' is the .blend's folder)", "lightmap", folder=True)
+    hookup: str = _option("none", "Hook Up", "show the lightmap in the objects' materials "
+                          "('--hookup' alone: node)", "lightmap", choices=HOOKUPS)
+    reunwrap: bool = _option(False, "Re-unwrap", "make new 'Lightmap' UVs even where a mesh "
+                             "already has them", "lightmap")
+    supersample: int = _option(1, "Supersample", "lighting samples per texel along each axis",
+                               "lightmap", low=1, high=8)
+    texel_indirect: str = _option("gather", "Texel Indirect", "indirect light per texel",
+                                  "lightmap", choices=TEXEL_INDIRECT)
+    lightmap_format: str = _option("half", "EXR Format", "precision of the EXR channels",
+                                   "lightmap", choices=LIGHTMAP_FORMATS)
+    pack_images: bool = _option(False, "Pack Images", "pack the lightmap images into the .blend "
+                                "file", "lightmap")
 
     @property
     def solver(self) -> str:
-        """The method with aliases resolved."""
+        """The solver that runs: AO content is the ``ao`` solver's, aliases are resolved."""
+        if self.content == "ao":
+            return "ao"
         return METHOD_ALIASES.get(self.method, self.method)
+
+    @property
+    def baked_content(self) -> str:
+        """The content baked: ``ao`` for the AO solver, else ``content``."""
+        return "ao" if self.solver == "ao" else self.content
+
+    def validate(self) -> "Settings":
+        """Raise SettingsError naming the setting for a value out of range; return self."""
+        for f in fields(self):
+            opt = option(f.name)
+            value = getattr(self, f.name)
+            if opt.choices is not None and value not in opt.choices:
+                raise SettingsError(f"{f.name} must be one of {', '.join(opt.choices)}, not {value!r}")
+            if opt.low is not None and not value >= opt.low:
+                raise SettingsError(f"{f.name} must be at least {opt.low:g}, not {value}")
+            if opt.high is not None and not value <= opt.high:
+                raise SettingsError(f"{f.name} must be at most {opt.high:g}, not {value}")
+        if not self.attribute or not self.attribute.strip():
+            raise SettingsError("attribute name must not be empty")
+        if self.target != "vertex_colors" and not self.output.strip():
+            raise SettingsError("output folder must not be empty when baking lightmaps")
+        if self.content == "indirect" and not SOLVERS[self.solver].indirect:
+            raise SettingsError(f"content indirect needs a method with indirect light; method "
+                                f"{self.method} computes none (it would bake black)")
+        return self
+
+    def unread(self) -> list[str]:
+        """Settings changed from their defaults that the chosen solver does not read (for a
+        warning: a bunnell bake ignores --bounces)."""
+        return [f.name for f in fields(self)
+                if getattr(self, f.name) != f.default and not reads(self.solver, f.name)]
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def group(self, name: str) -> dict:
+        """{field: value} of the settings read by ``name`` (one of GROUPS)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if option(f.name).group == name}
+
+
+def option(name: str) -> Option:
+    """The Option of Settings field ``name``."""
+    return _OPTIONS[name]
+
+
+def flag(name: str) -> str:
+    """The command-line option of Settings field ``name``."""
+    return option(name).flag or "--" + name.replace("_", "-")
+
+
+_OPTIONS = {f.name: f.metadata["option"] for f in fields(Settings)}
+# Settings only some solvers read (SolverInfo.reads names them); the others are read by all.
+SOLVER_SPECIFIC = {name for info in SOLVERS.values() for name in info.reads}
+# light_samples is read by every solver that transports light, not by AO.
+SOLVER_SPECIFIC.add("light_samples")
+
+
+def reads(solver: str, name: str) -> bool:
+    """Whether ``solver`` reads setting ``name`` (the panel greys out the others)."""
+    if name == "light_samples":
+        return SOLVERS[solver].light
+    return name not in SOLVER_SPECIFIC or name in SOLVERS[solver].reads
+
+
+def metavar(name: str) -> Optional[str]:
+    """The placeholder of Settings field ``name``'s value on the command line (None: a switch or
+    a choice)."""
+    opt, default = option(name), _DEFAULTS[name]
+    if opt.choices is not None or isinstance(default, bool):
+        return None
+    if isinstance(default, (int, float)):
+        return "N" if isinstance(default, int) else "X"
+    return "DIR" if opt.folder else "NAME"
+
+
+def describe(name: str) -> str:
+    """One line on Settings field ``name``: its help, what each method is, its range."""
+    opt = option(name)
+    text = opt.help
+    if opt.choices is not None and name not in ("device", "layout", "lightmap_format"):
+        text += ": " + "; ".join(f"{c}: {CHOICE_HELP[c]}" for c in opt.choices if c in CHOICE_HELP)
+    if name == "method":
+        text += "; " + ", ".join(f"{a} is another name for {m}" for a, m in METHOD_ALIASES.items())
+    if opt.low is not None and opt.high is not None:
+        text += f" ({opt.low:g} to {opt.high:g})"
+    elif opt.low is not None:
+        text += f" (at least {opt.low:g})"
+    return text
+
+
+def options_markdown() -> str:
+    """README's table of the settings' command-line options: flag, meaning, default."""
+    rows = ["| option | meaning (default) |", "| --- | --- |"]
+    for f in fields(Settings):
+        opt = option(f.name)
+        shown = flag(f.name)
+        if opt.choices is not None:
+            shown += " " + "\\|".join(opt.choices)
+        elif metavar(f.name):
+            shown += " " + metavar(f.name)
+        default = "off" if isinstance(f.default, bool) else f"`{f.default}`"
+        rows.append(f"| `{shown}` | {describe(f.name)} ({default}) |")
+    return "\n".join(rows)
+
+
+_DEFAULTS = {f.name: f.default for f in fields(Settings)}

@@ -22,16 +22,15 @@ class LightmapTarget:
     """One object to lightmap (the add-on's ``TargetMesh`` plus its existing UVs).
 
     object_name, mesh_name: Blender names; objects sharing ``mesh_name`` share its UV map.
-    corner_vert: int32[C] mesh vertex of each face corner; corner_shading: int32[C] global
-    shading vertex (index into SceneData) of each corner; corner_triangles: int32[T,3] corners of
-    the object's triangles, which are SceneData triangles ``triangle_offset … + T``.
-    corner_uv: float32[C,2] the mesh's existing ``Lightmap`` UVs to reuse, None to unwrap.
+    corner_vert: int32[C] mesh vertex of each face corner; corner_triangles: int32[T,3] face
+    corners of the object's triangles, which are SceneData triangles ``triangle_offset … + T``
+    (in their corner order). corner_uv: float32[C,2] the mesh's existing ``Lightmap`` UVs to reuse,
+    None to unwrap.
     """
 
     object_name: str
     mesh_name: str
     corner_vert: np.ndarray
-    corner_shading: np.ndarray
     corner_triangles: np.ndarray
     triangle_offset: int
     corner_uv: Optional[np.ndarray] = None
@@ -124,15 +123,16 @@ def _plan(targets: list, settings) -> tuple[list, list]:
     return groups, warnings
 
 
-def _corner_positions(t: LightmapTarget, scene) -> np.ndarray:
-    return scene.positions[t.corner_shading]
+def _triangles(t: LightmapTarget) -> slice:
+    """The target's triangles among the scene's."""
+    return slice(t.triangle_offset, t.triangle_offset + t.corner_triangles.shape[0])
 
 
 def _mesh_vertices(t: LightmapTarget, scene) -> np.ndarray:
-    """float32[N,3] world position of each mesh vertex (any of its corners)."""
+    """float32[N,3] position of each mesh vertex (from any of its corners)."""
     n = int(t.corner_vert.max()) + 1 if t.corner_vert.size else 0
     out = np.zeros((n, 3), np.float32)
-    out[t.corner_vert] = _corner_positions(t, scene)
+    out[t.corner_vert[t.corner_triangles]] = scene.positions[scene.triangles[_triangles(t)]]
     return out
 
 
@@ -152,7 +152,7 @@ def _page_side(owners: list, scene, uvs: dict, settings) -> tuple[tuple, float]:
     density it gives."""
     world, texture = 0.0, 0.0
     for o in owners:
-        p = _corner_positions(o, scene)[o.corner_triangles].astype(np.float64)
+        p = scene.positions[scene.triangles[_triangles(o)]].astype(np.float64)
         q = uvs[o.mesh_name][o.corner_triangles].astype(np.float64)
         world += 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
         e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
@@ -164,21 +164,16 @@ def _page_side(owners: list, scene, uvs: dict, settings) -> tuple[tuple, float]:
     return (side, side), side / np.sqrt(world / texture)
 
 
-def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, settings, dev,
-                   stages, texel_extra=None, gather=None) -> LightmapResult:
-    """Lay out, rasterise and light the lightmaps of ``request`` (stages of ``pipeline.bake``).
-
-    per_vertex: {"indirect": float32[V,3]} per-shading-vertex solution, interpolated over each
-    triangle; direct light is evaluated per texel with shadow rays. texel_extra(points, normals)
-    -> {content: float32[N,3]} supplies per-texel values of further contents (e.g. AO).
-    gather(points, normals, progress) -> float32[N,3]: a final gather of the solution (indirect
-    lighting at any points), with per_vertex["gathered"] its values at the vertices. A texel then
-    gets the interpolated solution plus what the gather finds at the texel beyond the
-    interpolation of its values at the vertices: detail finer than the mesh, while the solver's
-    accuracy at the vertices is kept (the gather's own error, mostly smooth, cancels).
-    """
+def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> LightmapResult:
+    """Lay out, rasterise and evaluate the lightmaps of ``request``: stages of ``pipeline.bake``
+    after the solve. Each covered texel is a receiver (``core.receivers``): direct light traced per
+    texel, the solver's ``evaluate`` at the texel (interpolation, a final gather, the AO gather …),
+    composed into the content as at the vertices."""
     from .. import direct
+    from .. import receivers as receivers_mod
+    from ..solvers import SOLVERS
 
+    settings, stages, scene, dev = problem.settings, problem.stages, problem.scene, problem.device
     if not request.targets:
         raise BakeError("no object to lightmap")
     groups, warnings = _plan(request.targets, settings)
@@ -229,51 +224,33 @@ def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, 
         out = []
         for _, _, (w, h), _, members in pages:
             tri_uv = np.concatenate([uvs[m.mesh_name][m.corner_triangles] for m in members])
-            tri_shading = np.concatenate([m.corner_shading[m.corner_triangles] for m in members])
-            tri_scene = np.concatenate([m.triangle_offset + np.arange(m.corner_triangles.shape[0])
-                                        for m in members]).astype(np.int64)
+            tri_scene = np.concatenate([np.arange(m.triangle_offset, m.triangle_offset
+                                                  + m.corner_triangles.shape[0]) for m in members])
             texels = raster.rasterize(tri_uv, w * s, h * s, dev)
-            pos = scene.positions[tri_shading]
+            pos = scene.positions[scene.triangles[tri_scene]]
             world = 0.5 * np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
             q = tri_uv.astype(np.float64) * (w * s, h * s)
             e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
             uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-            metres = np.sqrt(world / np.where(uv_area > 0, uv_area, np.inf))
-            points, normals = raster.surface_points(texels, pos, scene.normals[tri_shading],
-                                                    np.nan_to_num(metres), geometry, dev)
-            out.append((texels, tri_shading, tri_scene, points, normals, tri_uv))
+            metres = np.nan_to_num(np.sqrt(world / np.where(uv_area > 0, uv_area, np.inf)))
+            points, normals = raster.surface_points(texels, pos, scene.corner_normals[tri_scene],
+                                                    metres, problem)
+            out.append((texels, tri_scene[texels.triangle], points, normals, metres[texels.triangle]))
         return out
 
     rastered = stages.run("raster", rasterize_all)
-    points = np.concatenate([r[3] for r in rastered]) if rastered else np.zeros((0, 3), np.float32)
-    normals = np.concatenate([r[4] for r in rastered]) if rastered else np.zeros((0, 3), np.float32)
-
-    if settings.content == "ao":  # AO needs no light
-        lit_direct = np.zeros_like(points)
-    else:
-        lit_direct, _ = stages.run("texel direct", direct.direct_lighting, geometry, scene, points,
-                                   normals, settings, dev, lambda f: stages.report("texel direct", f))
-
-    def interpolate(values):
-        parts = [np.einsum("nk,nkc->nc", r[0].bary, values[r[1][r[0].triangle]]) for r in rastered]
-        return np.concatenate(parts).astype(np.float32) if parts else np.zeros((0, 3), np.float32)
-
-    indirect = stages.run("texel indirect", interpolate, per_vertex["indirect"])
-    if gather is not None and len(points):
-        detail = stages.run("texel gather", gather, points, normals,
-                            lambda f: stages.report("texel gather", f))
-        detail -= stages.run("texel indirect", interpolate, per_vertex["gathered"])
-        indirect = np.maximum(indirect + detail, 0.0)
-    lighting = lit_direct + indirect
-    tri = np.concatenate([r[2][r[0].triangle] for r in rastered]) if rastered else np.zeros(0, np.int64)
-    contents = {"lighting": lighting, "indirect": indirect,
-                "combined": scene.emission[tri] + scene.albedo[tri] * lighting}
-    if texel_extra is not None:
-        contents.update(texel_extra(points, normals))
-    if settings.content not in contents:
-        raise BakeError(f"content {settings.content!r} cannot be baked into lightmaps yet; "
-                        f"use one of {', '.join(contents)}")
-    values = contents[settings.content]
+    cat = (lambda i: np.concatenate([r[i] for r in rastered]))
+    texel_receivers = receivers_mod.on_triangles(problem, cat(1), np.concatenate([r[0].bary for r in rastered]),
+                                                 cat(2), cat(3), cat(4).astype(np.float32))
+    if SOLVERS[settings.solver].light:
+        lit_direct, rays = stages.run("texel direct", direct.direct_lighting, problem,
+                                      texel_receivers.points, texel_receivers.normals,
+                                      texel_receivers.sizes, stages.reporter("texel direct"))
+        problem.counts["rays"] += rays
+    else:  # AO needs no light
+        lit_direct = np.zeros((len(texel_receivers), 3), np.float32)
+    field_values = solver.evaluate(problem, solution, texel_receivers)
+    values = receivers_mod.compose(settings.baked_content, field_values, lit_direct, texel_receivers)
 
     def assemble():
         out, start, seam_error = [], 0, 0.0
@@ -284,10 +261,13 @@ def bake_lightmaps(request: LightmapRequest, scene, geometry, per_vertex: dict, 
             rgb = dilate(rgb, covered, settings.padding)
             out.append(Page(name, objects, rgb, covered, density))
             for m in members:
-                seam_error = max(seam_error, seam_difference(rgb, uvs[m.mesh_name], m))
+                seam_error = max(seam_error, seam_difference(
+                    rgb, uvs[m.mesh_name], m.corner_triangles, problem.shading.corner[_triangles(m)]))
         return out, seam_error
 
     result_pages, seam_error = stages.run("dilate", assemble)
+    for message in warnings:
+        stages.warn(message)
     return LightmapResult(pages=result_pages, uv=made, seam_error=seam_error,
                           texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings)
 
@@ -349,16 +329,18 @@ def bilinear(rgb: np.ndarray, uv: np.ndarray) -> np.ndarray:
 _SEAM_SAMPLES = np.linspace(0.1, 0.9, 5)
 
 
-def seam_difference(rgb: np.ndarray, corner_uv: np.ndarray, target: LightmapTarget) -> float:
-    """Largest difference across smooth UV seams of ``target`` in the page ``rgb``, relative to the
-    page's brightest texel.
+def seam_difference(rgb: np.ndarray, corner_uv: np.ndarray, corner_triangles: np.ndarray,
+                    shading: np.ndarray) -> float:
+    """Largest difference across smooth UV seams of one object in the page ``rgb``, relative to
+    the page's brightest texel.
 
-    A smooth seam edge joins two triangles through the same two shading vertices (same normals on
+    corner_uv: float32[C,2] the object's UVs per face corner; corner_triangles: int32[T,3] face
+    corners of its triangles; shading: int32[T,3] the shading vertex of each triangle corner. A
+    smooth seam edge joins two triangles through the same two shading vertices (same normals on
     both sides) while their UVs differ; both sides are sampled bilinearly at matching points along
     the edge. Edges across hard edges (different shading vertices) are not seams of the lighting.
     """
-    tris = target.corner_triangles
-    shading = target.corner_shading[tris]                       # [T,3]
+    tris = corner_triangles
     a_idx, b_idx = [0, 1, 2], [1, 2, 0]
     sa, sb = shading[:, a_idx].ravel(), shading[:, b_idx].ravel()
     ca, cb = tris[:, a_idx].ravel(), tris[:, b_idx].ravel()

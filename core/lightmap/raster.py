@@ -14,6 +14,7 @@ import warp as wp
 
 from .. import device as device_mod
 from ..formfactor import tangent_frame
+from ..rays import lift
 
 # Half a texel's diagonal (texel units): a triangle within this distance of a texel's centre
 # overlaps the texel.
@@ -162,7 +163,7 @@ def _surface_kernel(offset: int, mesh: wp.uint64, bary: wp.array(dtype=wp.vec3),
                     tri: wp.array(dtype=wp.int32), p0: wp.array(dtype=wp.vec3),
                     p1: wp.array(dtype=wp.vec3), p2: wp.array(dtype=wp.vec3),
                     n0: wp.array(dtype=wp.vec3), n1: wp.array(dtype=wp.vec3),
-                    n2: wp.array(dtype=wp.vec3), reach: wp.array(dtype=wp.float32), eps: float,
+                    n2: wp.array(dtype=wp.vec3), reach: wp.array(dtype=wp.float32),
                     inset: float, out_p: wp.array(dtype=wp.vec3), out_n: wp.array(dtype=wp.vec3)):
     i = wp.tid() + offset
     t = tri[i]
@@ -172,9 +173,9 @@ def _surface_kernel(offset: int, mesh: wp.uint64, bary: wp.array(dtype=wp.vec3),
     # Leak guard: a surface the texel straddles (a wall standing on this floor) is seen from
     # behind by a ray along the surface; the sample then moves just in front of that wall, to the
     # side of it the texel's own triangle is on.
-    origin = p + n * eps
-    t1, t2 = tangent_frame(n)
     length = reach[t]
+    origin = lift(p, n, length)
+    t1, t2 = tangent_frame(n)
     best = length
     moved = p
     for k in range(4):
@@ -190,19 +191,20 @@ def _surface_kernel(offset: int, mesh: wp.uint64, bary: wp.array(dtype=wp.vec3),
             fn = wp.normalize(q.normal)
             if wp.dot(fn, d) > 0.0:
                 best = q.t
-                moved = origin + d * q.t + fn * eps
+                moved = lift(origin + d * q.t, fn, length)
     out_p[i] = moved
     out_n[i] = n
 
 
 def surface_points(texels: Texels, tri_pos: np.ndarray, tri_nrm: np.ndarray, metres_per_texel: np.ndarray,
-                   geometry, dev: device_mod.Device):
-    """World sample points and normals of ``texels``: float32[N,3] each.
+                   problem):
+    """Sample points and normals of ``texels``: float32[N,3] each.
 
-    tri_pos, tri_nrm: float32[T,3,3] world corner positions (m) and shading normals of the page's
-    triangles; metres_per_texel: float32[T] world size of a texel on each triangle; geometry: the
-    scene's ``direct.SceneGeometry`` (its BVH and ray offset).
+    tri_pos, tri_nrm: float32[T,3,3] corner positions (m, the problem's frame) and shading normals
+    of the page's triangles; metres_per_texel: float32[T] world size of a texel on each triangle;
+    problem: the bake's ``core.problem.Problem`` (its BVH and device).
     """
+    dev = problem.device
     d = dev.name
     n = texels.count
     arrays = [wp.array(np.ascontiguousarray(a[:, k], np.float32), dtype=wp.vec3, device=d)
@@ -211,8 +213,8 @@ def surface_points(texels: Texels, tri_pos: np.ndarray, tri_nrm: np.ndarray, met
     out_n = wp.zeros(n, dtype=wp.vec3, device=d)
     device_mod.launch(
         _surface_kernel, n,
-        [geometry.mesh.id, wp.array(texels.bary, dtype=wp.vec3, device=d),
+        [problem.mesh.id, wp.array(texels.bary, dtype=wp.vec3, device=d),
          wp.array(texels.triangle, dtype=wp.int32, device=d), *arrays,
          wp.array((metres_per_texel * REACH).astype(np.float32), dtype=wp.float32, device=d),
-         float(geometry.eps), INSET, out_p, out_n], dev)
+         INSET, out_p, out_n], dev)
     return out_p.numpy(), out_n.numpy()

@@ -1,0 +1,54 @@
+"""The solvers, one module each, and their registry.
+
+Every solver module provides::
+
+    solve(problem) -> base.Solution                    # per element
+    evaluate(problem, solution, receivers) -> float32[R,3]   # at any receivers
+    check(problem) -> list[str]                         # optional: warnings before solving
+
+``solve`` reads the problem (``core.problem.Problem``: elements, device arrays, direct light, the
+tree) and returns per-element values; ``evaluate`` maps them to receivers (``core.receivers``):
+shading vertices for color attributes, lightmap texels. A light solver's values are indirect
+lighting (irradiance/π; the pipeline adds the direct part), the AO solver's accessibility.
+
+Adding a solver: write ``core/solvers/<name>.py`` with ``solve`` and ``evaluate`` and add one
+``SolverInfo`` line to ``SOLVERS`` below. This module imports no solver (nor Warp) until one is
+asked for, so settings and the Blender UI can read the registry cheaply.
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SolverInfo:
+    """name: the ``--method`` value; description: one line for the UI; reads: the settings the
+    solver reads beyond the common ones (the panel greys out the others); light: it transports
+    light (direct light is computed for it); indirect: it computes indirect light."""
+
+    name: str
+    description: str
+    reads: tuple = ()
+    light: bool = True
+    indirect: bool = True
+
+
+SOLVERS = {info.name: info for info in (
+    SolverInfo("direct", "Lamps and emissive surfaces only, with shadows (fast)", indirect=False),
+    SolverInfo("reference", "Direct light plus multi-bounce indirect light over all element pairs "
+               "with ray-cast visibility (ground truth, small scenes)",
+               reads=("visibility_rays", "bounces", "tolerance", "max_pairs", "texel_indirect")),
+    SolverInfo("bunnell", "Direct light plus one bounce of indirect light gathered over a disk "
+               "hierarchy (fast, large scenes, approximate)", reads=("texel_indirect",)),
+    SolverInfo("ao", "Ambient occlusion: the unoccluded fraction of the hemisphere within the AO "
+               "distance (what Cycles' AO bake gives)", reads=("ao_distance",), light=False,
+               indirect=False),
+)}
+
+
+def get(name: str):
+    """The solver module registered as ``name``."""
+    if name not in SOLVERS:
+        raise KeyError(f"no solver {name!r}; known: {', '.join(SOLVERS)}")
+    return importlib.import_module(f"{__name__}.{name}")

@@ -1,78 +1,57 @@
 """Reference radiosity: all-pairs multi-bounce gather between element disks with explicit,
 ray-cast visibility (O(n²) pairs; the ground truth for small scenes).
 
-Transport matrix ``M[i, j] = F_ij · V_ij``: F_ij the form factor from element i's point to the
-front face of element j (disk approximation far away, exact triangle form factors of j's fan, a
-third each, when d² < NEAR·A_j), V_ij the unblocked fraction of rays from i to jittered points of
-j's own triangles. Then iteration of ``I = M (ρ ⊙ (D + I))`` in lighting units (irradiance/π), D the direct
-lighting. M is held whole while n² fits the pair budget, else processed in row blocks.
+Transport ``M[i, j] = F_ij · V_ij``: F_ij the form factor from element i's point to the front face
+of element j (disk approximation far away, exact triangle form factors of j's fan, a third each,
+when d² < NEAR·A_j), V_ij the unblocked fraction of rays from i to jittered points of j's own
+triangles (the same for i→j and j→i, traced once). Then Jacobi sweeps ``I ← M (ρ ⊙ (D + I))`` on
+the device in lighting units (irradiance/π), D the direct lighting, until the largest change is
+below the tolerance.
+
+What is kept between sweeps depends on the memory budget (``max_pairs`` × 4 bytes): the whole
+float32 matrix when it fits (``matrix``), else the visibility of every pair as one byte
+(``visibility``; form factors, which cost no rays, are recomputed each sweep), else nothing
+(``traced``: visibility is traced again each sweep — slow, the bake says so).
 """
 from __future__ import annotations
-
-from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
 
 from .. import device as device_mod
-from ..elements import Elements
+from ..errors import BakeError
 from ..formfactor import disk_ff, fan_ff
+from ..problem import Surfels
+from ..rays import lift
+from .base import Solution, reconstruct_with_detail
 
 # Below this many disk areas of squared distance the disk approximation is replaced by the
 # exact form factor of the sender's triangles. ALGORITHMS.md §1 suggests 4–8 for a fast method;
 # the reference pays ~50 % more time for 64, which keeps the perpendicular-squares form factor
 # within 0.4 % at 32×32 quads (8 gave 1.2 % low).
 NEAR = 64.0
-
-
-@dataclass
-class Solution:
-    """indirect: float32[n,3] indirect lighting per element; counts: pairs, rays, iterations."""
-
-    indirect: np.ndarray
-    counts: dict = field(default_factory=dict)
-
-
-@wp.struct
-class Surfels:
-    """Element disks and the triangles they stand for, as the transport kernels read them.
-
-    mesh: BVH id of all triangles; pos, nrm, area: the elements; fan_offsets/fan_triangles: each
-    element's triangles (CSR); tris: flat triangle corners; points: vertex positions; rays: rays
-    per pair; eps: ray offset (m); seed: jitter seed.
-    """
-
-    mesh: wp.uint64
-    pos: wp.array(dtype=wp.vec3)
-    nrm: wp.array(dtype=wp.vec3)
-    area: wp.array(dtype=wp.float32)
-    fan_offsets: wp.array(dtype=wp.int32)
-    fan_triangles: wp.array(dtype=wp.int32)
-    tris: wp.array(dtype=wp.int32)
-    points: wp.array(dtype=wp.vec3)
-    rays: int
-    eps: float
-    seed: int
-
-
-@wp.func
-def _fan_triangle_area2(s: Surfels, t: int) -> float:
-    a = s.points[s.tris[3 * t]]
-    return wp.length(wp.cross(s.points[s.tris[3 * t + 1]] - a, s.points[s.tris[3 * t + 2]] - a))
+MATRIX, VISIBILITY, TRACED = 0, 1, 2
+MODES = ("matrix", "visibility", "traced")
+# Element pairs with their visibility traced per second and CPU thread (visibility_rays = 4),
+# measured on the sample Cornell box; predictions of the time a bake takes scale from it.
+PAIRS_PER_SECOND_PER_THREAD = 2.0e6
+CUDA_SPEEDUP = 50.0
+# A bake predicted to take longer than this (s) is announced with the pair count and the time.
+SLOW_SECONDS = 60.0
 
 
 @wp.func
 def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
     """A point of element j's own surface: on one of its triangles (chosen by area with u0), in the
-    half of it nearest to j. Points on the real surface, unlike the tangent disk, stay inside a
-    curved closed mesh."""
+    half of it nearest to j's vertex. Points on the real surface, unlike the tangent disk, stay
+    inside a curved closed mesh."""
     total = float(0.0)
     for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        total += _fan_triangle_area2(s, s.fan_triangles[k])
+        total += _triangle_area2(s, s.fan_triangles[k])
     pick = u0 * total
     chosen = s.fan_triangles[s.fan_offsets[j]]
     for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        pick -= _fan_triangle_area2(s, s.fan_triangles[k])
+        pick -= _triangle_area2(s, s.fan_triangles[k])
         if pick <= 0.0:
             chosen = s.fan_triangles[k]
             break
@@ -81,8 +60,14 @@ def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
     c = s.points[s.tris[3 * chosen + 2]]
     r = wp.sqrt(u1)
     q = a * (1.0 - r) + b * (r * (1.0 - u2)) + c * (r * u2)
-    pj = s.points[j]
+    pj = s.points[s.vertex[j]]
     return pj + (q - pj) * 0.5
+
+
+@wp.func
+def _triangle_area2(s: Surfels, t: int) -> float:
+    a = s.points[s.tris[3 * t]]
+    return wp.length(wp.cross(s.points[s.tris[3 * t + 1]] - a, s.points[s.tris[3 * t + 2]] - a))
 
 
 @wp.func
@@ -96,156 +81,206 @@ def element_ff(s: Surfels, i: int, j: int) -> float:
 
 
 @wp.func
-def pair_visibility(s: Surfels, i: int, j: int) -> float:
-    """Unblocked fraction of rays from min(i,j)'s point to stratified points of the other's own
-    surface, both lifted off their surfaces by eps. Seeded by the pair and always traced the same
-    way round, so every evaluation of a pair gives the same value."""
+def pair_hits(s: Surfels, i: int, j: int, rays: int, seed: int) -> int:
+    """Unblocked rays of ``rays`` from min(i,j)'s point to stratified points of the other's own
+    surface, both lifted off their surfaces. Seeded by the pair and always traced the same way
+    round, so every evaluation of a pair gives the same value."""
     lo = wp.min(i, j)
     hi = wp.max(i, j)
-    state = wp.rand_init(s.seed, lo * 65521 + hi)
-    origin = s.pos[lo] + s.nrm[lo] * s.eps
-    hits = float(0.0)
-    for k in range(s.rays):
-        u0 = (float(k) + wp.randf(state)) / float(s.rays)
-        q = fan_sample(s, hi, u0, wp.randf(state), wp.randf(state)) + s.nrm[hi] * s.eps
+    state = wp.rand_init(seed, lo * 65521 + hi)
+    origin = lift(s.pos[lo], s.nrm[lo], wp.sqrt(s.area[lo]))
+    hits = int(0)
+    for k in range(rays):
+        u0 = (float(k) + wp.randf(state)) / float(rays)
+        q = lift(fan_sample(s, hi, u0, wp.randf(state), wp.randf(state)), s.nrm[hi], wp.sqrt(s.area[hi]))
         d = q - origin
         dist = wp.length(d)
         if dist <= 0.0:
-            hits += 1.0
+            hits += 1
         elif not wp.mesh_query_ray_anyhit(s.mesh, origin, d / dist, dist * 0.9999):
-            hits += 1.0
-    return hits / float(s.rays)
+            hits += 1
+    return hits
 
 
 @wp.kernel
-def _pairs_kernel(offset: int, n_el: int, s: Surfels, out: wp.array2d(dtype=wp.float32),
-                  rays: wp.array(dtype=wp.int32)):
-    """Whole matrix: thread (i, j) with i < j fills both M[i, j] and M[j, i] (one visibility)."""
-    idx = wp.tid() + offset
-    i = idx / n_el
-    j = idx - i * n_el
-    if j <= i or s.area[i] <= 0.0 or s.area[j] <= 0.0:
-        return
-    f_ij = element_ff(s, i, j)
-    f_ji = element_ff(s, j, i)
-    if f_ij <= 0.0 and f_ji <= 0.0:
-        return
-    vis = pair_visibility(s, i, j)
-    out[i, j] = f_ij * vis
-    out[j, i] = f_ji * vis
-    wp.atomic_add(rays, 0, s.rays)
+def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: int,
+                  matrix: wp.array2d(dtype=wp.float32), visibility: wp.array2d(dtype=wp.uint8),
+                  traced: wp.array(dtype=wp.int64)):
+    """Thread t fills rows t and n−1−t against every later column (the same work per thread):
+    M[i, j] and M[j, i] (``matrix``) or their shared visibility (``visibility``)."""
+    t = wp.tid() + offset
+    count = int(0)
+    for side in range(2):
+        i = t
+        if side == 1:
+            i = n - 1 - t
+        if side == 0 or i > t:
+            for j in range(i + 1, n):
+                if s.area[i] <= 0.0 or s.area[j] <= 0.0:
+                    continue
+                f_ij = element_ff(s, i, j)
+                f_ji = element_ff(s, j, i)
+                if f_ij <= 0.0 and f_ji <= 0.0:
+                    continue
+                hits = pair_hits(s, i, j, rays, seed)
+                count += rays
+                if mode == MATRIX:
+                    v = float(hits) / float(rays)
+                    matrix[i, j] = f_ij * v
+                    matrix[j, i] = f_ji * v
+                else:
+                    visibility[i, j] = wp.uint8(hits)
+                    visibility[j, i] = wp.uint8(hits)
+    wp.atomic_add(traced, 0, wp.int64(count))
 
 
 @wp.kernel
-def _rows_kernel(offset: int, n_el: int, row0: int, s: Surfels, out: wp.array2d(dtype=wp.float32),
-                 rays: wp.array(dtype=wp.int32)):
-    """Rows row0.. of M into out (block-local row index): the bounded-memory path."""
-    idx = wp.tid() + offset
-    r = idx / n_el
-    j = idx - r * n_el
-    i = row0 + r
-    out[r, j] = 0.0
-    if i == j or s.area[i] <= 0.0 or s.area[j] <= 0.0:
-        return
-    f_ij = element_ff(s, i, j)
-    if f_ij <= 0.0:
-        return
-    out[r, j] = f_ij * pair_visibility(s, i, j)
-    wp.atomic_add(rays, 0, s.rays)
+def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: int,
+                  matrix: wp.array2d(dtype=wp.float32), visibility: wp.array2d(dtype=wp.uint8),
+                  direct: wp.array(dtype=wp.vec3), indirect: wp.array(dtype=wp.vec3),
+                  out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int64)):
+    """One Jacobi sweep of row i: out_i = Σ_j M_ij ρ_j (D_j + I_j)."""
+    i = wp.tid() + offset
+    acc = wp.vec3(0.0)
+    count = int(0)
+    if s.area[i] > 0.0:
+        for j in range(n):
+            if j == i:
+                continue
+            m = float(0.0)
+            if mode == MATRIX:
+                m = matrix[i, j]
+            elif s.area[j] > 0.0:
+                f = element_ff(s, i, j)
+                if f > 0.0:
+                    if mode == VISIBILITY:
+                        m = f * float(visibility[i, j]) / float(rays)
+                    else:
+                        m = f * float(pair_hits(s, i, j, rays, seed)) / float(rays)
+                        count += rays
+            if m > 0.0:
+                acc += m * wp.cw_mul(s.albedo[j], direct[j] + indirect[j])
+    out[i] = acc
+    if count > 0:
+        wp.atomic_add(traced, 0, wp.int64(count))
 
 
 class Transport:
-    """The transport M (lighting at i per unit radiance leaving j) of n elements.
+    """The transport of ``problem``'s n elements on its device, in the mode the budget allows
+    (MATRIX, VISIBILITY or TRACED, see the module docstring)."""
 
-    Held whole (float32[n,n], each pair's visibility traced once) when n² ≤ settings.max_pairs;
-    otherwise produced in blocks of ``block_rows`` rows, recomputed on every sweep, so memory stays
-    within the budget.
-    """
-
-    def __init__(self, geometry, els: Elements, settings, dev: device_mod.Device):
-        n = els.count
+    def __init__(self, problem):
+        settings = problem.settings
+        n = problem.elements.count
+        self.problem = problem
         self.n = n
-        self.dev = dev
-        self.geometry = geometry  # keeps the BVH alive: kernels only get its id
-        d = dev.name
-        self.block_rows = n if n * n <= settings.max_pairs else max(1, settings.max_pairs // n)
-        self.rays = wp.zeros(1, dtype=wp.int32, device=d)
-        s = Surfels()
-        s.mesh = geometry.mesh.id
-        s.pos = wp.array(els.position, dtype=wp.vec3, device=d)
-        s.nrm = wp.array(els.normal, dtype=wp.vec3, device=d)
-        s.area = wp.array(els.area, dtype=wp.float32, device=d)
-        s.fan_offsets = wp.array(els.fan_offsets, dtype=wp.int32, device=d)
-        s.fan_triangles = wp.array(els.fan_triangles, dtype=wp.int32, device=d)
-        s.tris = geometry.indices
-        s.points = geometry.points
-        s.rays = int(settings.visibility_rays)
-        s.eps = float(geometry.eps)
-        s.seed = int(settings.seed) + 7919
-        self._surfels = s
-        self._buffer = wp.zeros((self.block_rows, n), dtype=wp.float32, device=d)
-        self.whole = None
+        budget = 4 * int(settings.max_pairs)  # bytes
+        self.mode = MATRIX if 4 * n * n <= budget else VISIBILITY if n * n <= budget else TRACED
+        need = {MATRIX: 4 * n * n, VISIBILITY: n * n, TRACED: 0}[self.mode]
+        free = device_mod.free_memory(problem.device)
+        if free is not None and need > 0.8 * free:
+            raise BakeError(f"the reference transport of {n} elements needs {need / 2**30:.2f} GiB "
+                            f"({MODES[self.mode]} mode, --max-pairs {settings.max_pairs}) but only "
+                            f"{free / 2**30:.2f} GiB of memory are free: lower --max-pairs")
+        d = problem.device.name
+        self.matrix = wp.zeros((n, n) if self.mode == MATRIX else (1, 1), dtype=wp.float32, device=d)
+        self.visibility = wp.zeros((n, n) if self.mode == VISIBILITY else (1, 1), dtype=wp.uint8,
+                                   device=d)
+        self.traced = wp.zeros(1, dtype=wp.int64, device=d)
+        self.rays = int(settings.visibility_rays)
+        self.seed = int(settings.seed) + 7919
 
-    @property
-    def held(self) -> bool:
-        return self.block_rows == self.n
-
-    def build_whole(self, progress=None) -> np.ndarray:
-        """Compute and keep the whole matrix (only when held)."""
+    def build(self, progress=None) -> None:
+        """Trace every pair's visibility once (and keep the matrix or the visibility)."""
+        if self.mode == TRACED:
+            return
         n = self.n
-        device_mod.launch(_pairs_kernel, n * n, [n, self._surfels, self._buffer, self.rays], self.dev,
-                          chunks=max(1, min(64, n // 64)), on_chunk=progress)
-        self.whole = self._buffer.numpy()
-        return self.whole
+        device_mod.launch(_pairs_kernel, (n + 1) // 2,
+                          [n, self.problem.surfels, self.rays, self.seed, self.mode, self.matrix,
+                           self.visibility, self.traced],
+                          self.problem.device, chunks=max(1, min(64, n // 128)), on_chunk=progress)
 
-    def rows(self, row0: int) -> np.ndarray:
-        """float32[k, n]: rows row0 … row0+k−1 of M (k = block_rows, fewer at the end)."""
+    def sweep(self, direct: wp.array, indirect: wp.array, out: wp.array, progress=None) -> None:
+        """out ← M (ρ ⊙ (direct + indirect)) (vec3[n] device arrays)."""
         n = self.n
-        k = min(self.block_rows, n - row0)
-        device_mod.launch(_rows_kernel, k * n, [n, row0, self._surfels, self._buffer, self.rays],
-                          self.dev)
-        return self._buffer.numpy()[:k]
+        device_mod.launch(_sweep_kernel, n,
+                          [n, self.problem.surfels, self.rays, self.seed, self.mode, self.matrix,
+                           self.visibility, direct, indirect, out, self.traced],
+                          self.problem.device,
+                          chunks=1 if self.mode == MATRIX else max(1, min(16, n // 256)),
+                          on_chunk=progress)
 
     @property
     def rays_traced(self) -> int:
-        return int(self.rays.numpy()[0])
+        return int(self.traced.numpy()[0])
 
 
-def solve(geometry, els: Elements, direct: np.ndarray, settings, dev: device_mod.Device,
-          progress=None) -> Solution:
-    """Indirect lighting per element (float32[n,3]) from direct lighting ``direct`` (float32[n,3]).
+def predicted_seconds(problem) -> float:
+    """How long the transport's visibility takes on ``problem``'s device (s), from the measured
+    rate; in TRACED mode once per sweep, up to ``bounces`` sweeps."""
+    n = problem.elements.count
+    dev = problem.device
+    rate = PAIRS_PER_SECOND_PER_THREAD * dev.threads * (CUDA_SPEEDUP if dev.is_cuda else 1.0)
+    rate *= 4.0 / max(1, problem.settings.visibility_rays)
+    seconds = 0.5 * n * n / rate
+    if 4 * n * n > 4 * problem.settings.max_pairs and n * n > 4 * problem.settings.max_pairs:
+        seconds *= 2 * problem.settings.bounces  # traced: every sweep traces every row
+    return seconds
 
-    Held transport: Jacobi sweeps ``I ← M (ρ ⊙ (D + I))``. Blocked transport: Gauss–Seidel sweeps
-    over row blocks (each block's new values are used by the next block at once). Either stops
-    when the largest change is below ``tolerance`` × the largest lighting value, or after
-    ``bounces`` sweeps.
-    """
-    def report(stage, f):
-        if progress is not None:
-            progress(stage, f)
 
-    transport = Transport(geometry, els, settings, dev)
-    rho = els.albedo.astype(np.float64)
-    d = direct.astype(np.float64)
-    indirect = np.zeros_like(d)
-    if transport.held:
-        m = transport.build_whole(lambda f: report("form factors", f))
+def check(problem) -> list[str]:
+    """Warnings before the solve: a bake predicted to run long says so, with the pair count and
+    the method to use instead."""
+    seconds = predicted_seconds(problem)
+    if seconds < SLOW_SECONDS:
+        return []
+    n = problem.elements.count
+    return [f"the reference solver traces {n * n / 2:.3g} element pairs for {n} elements: "
+            f"predicted {_duration(seconds)} on {problem.device.name} ({problem.device.threads} "
+            f"threads); use --method bunnell for scenes this large (the reference is the "
+            f"yardstick for small scenes)"]
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def solve(problem) -> Solution:
+    """Indirect lighting per element (float32[n,3], irradiance/π) from the problem's direct
+    lighting: Jacobi sweeps until the largest change is below ``tolerance`` × the largest
+    lighting value, or after ``bounces`` sweeps."""
+    settings, stages = problem.settings, problem.stages
+    direct = problem.direct
+    d = problem.device.name
+    transport = Transport(problem)
+    stages.run("form factors", transport.build, stages.reporter("form factors"))
+    n = problem.elements.count
+    dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
+    current = wp.zeros(n, dtype=wp.vec3, device=d)
+    nxt = wp.zeros(n, dtype=wp.vec3, device=d)
+    before = np.zeros((n, 3), np.float32)
+    scale_direct = float(np.abs(direct).max(initial=0.0))
     sweeps = 0
     for sweeps in range(1, settings.bounces + 1):
-        before = indirect.copy()
-        if transport.held:
-            indirect = m @ (rho * (d + indirect))
-        else:
-            for row0 in range(0, transport.n, transport.block_rows):
-                block = transport.rows(row0)
-                indirect[row0:row0 + len(block)] = block @ (rho * (d + indirect))
-                report("bounces", (sweeps - 1 + (row0 + len(block)) / transport.n) / settings.bounces)
-        change = float(np.abs(indirect - before).max(initial=0.0))
-        scale = float(max(np.abs(indirect).max(initial=0.0), np.abs(d).max(initial=0.0), 1e-30))
-        report("bounces", sweeps / settings.bounces)
+        transport.sweep(dev_direct, current, nxt,
+                        lambda f, k=sweeps: stages.report("bounces", (k - 1 + f) / settings.bounces))
+        current, nxt = nxt, current
+        now = current.numpy()
+        change = float(np.abs(now - before).max(initial=0.0))
+        scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
+        before = now
+        stages.report("bounces", sweeps / settings.bounces)
         if change <= settings.tolerance * scale:
             break
-    return Solution(indirect.astype(np.float32),
-                    {"pairs": els.count * els.count, "rays": transport.rays_traced,
-                     "iterations": sweeps, "transport_held": int(transport.held),
-                     "block_rows": transport.block_rows})
+    return Solution(before, {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps,
+                             "transport": MODES[transport.mode]})
+
+
+def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
+    """Indirect lighting at ``receivers``: the solution at the vertices; at other points (lightmap
+    texels) interpolated, plus the detail of the tree's final gather (``texel_indirect``)."""
+    return reconstruct_with_detail(problem, solution, receivers)

@@ -3,9 +3,8 @@
 Cycles' AO bake: the cosine-weighted fraction of rays leaving each vertex that hit nothing within
 the world's AO distance, averaged over the vertex's face corners; ours: ``--content ao`` through
 extraction and the pipeline with the same distance (read from the world). Measured figures are
-printed and written to bench/results/ao_vs_cycles.json.
+printed and written to out/test-figures/ao_vs_cycles.json.
 """
-import json
 import math
 from pathlib import Path
 
@@ -16,10 +15,11 @@ import pytest
 from radiosity_baker.addon.compare import bake_vertex_values, stack
 from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
 from radiosity_baker.core import Settings, metrics
+
+import figures as figures_file
 from scenes import grid
 
 ROOT = Path(__file__).resolve().parents[2]
-RESULTS = ROOT / "bench" / "results" / "ao_vs_cycles.json"
 CYCLES_SAMPLES = 256   # per face corner: noise σ ≈ 0.03 per corner, averaged over 4–6 corners
 TOLERANCE = 0.05       # mean absolute error of accessibility
 
@@ -29,10 +29,7 @@ def _meshes(scene):
 
 
 def _record(case: str, figures: dict) -> None:
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    table = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
-    table[case] = figures
-    RESULTS.write_text(json.dumps(table, indent=2, sort_keys=True) + "\n")
+    figures_file.record("ao_vs_cycles", case, figures)
 
 
 def _compare(names):

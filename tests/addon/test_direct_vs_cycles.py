@@ -2,11 +2,9 @@
 
 Our value: the ``direct`` method through extraction, the pipeline and writing the color attribute.
 Cycles': a DIFFUSE bake with the Direct pass only (no Color), i.e. irradiance/π from lamps and
-emissive meshes. Measured figures are printed and written to bench/results/direct_vs_cycles.json.
+emissive meshes. Measured figures are printed and written to out/test-figures/direct_vs_cycles.json.
 """
-import json
 import math
-from pathlib import Path
 
 import bpy
 import numpy as np
@@ -17,7 +15,8 @@ from radiosity_baker.addon.extract import extract_scene
 from radiosity_baker.addon.write import write_color_attributes
 from radiosity_baker.core import Settings, bake, metrics
 
-RESULTS = Path(__file__).resolve().parents[2] / "bench" / "results" / "direct_vs_cycles.json"
+import figures as figures_file
+
 TOLERANCE = 0.03        # relative RMSE, per lamp type
 CYCLES_SAMPLES = 1024
 LIGHT_SAMPLES = 64
@@ -90,10 +89,7 @@ def _our_direct(receiver_name: str) -> np.ndarray:
 
 
 def _record(case: str, figures: dict) -> None:
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    table = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
-    table[case] = figures
-    RESULTS.write_text(json.dumps(table, indent=2, sort_keys=True) + "\n")
+    figures_file.record("direct_vs_cycles", case, figures)
 
 
 def test_cycles_harness_reads_sun_irradiance_over_pi(empty_scene):

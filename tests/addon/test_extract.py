@@ -27,11 +27,11 @@ def extract(receivers=None):
 
 
 def object_vertices(ex, name):
-    """float32[N,3]: positions of the shading vertices used by the triangles of object ``name``."""
+    """float64[N,3]: world positions of the vertices used by the triangles of object ``name``."""
     s = ex.scene
     idx = [i for i, n in enumerate(s.object_names) if n == name]
     tris = s.triangles[np.isin(s.tri_object, idx)]
-    return s.positions[np.unique(tris)]
+    return s.positions[np.unique(tris)] + s.origin
 
 
 def object_albedo(ex, name):
@@ -121,8 +121,8 @@ def test_collection_instances_repeat_geometry_with_their_matrices():
     np.testing.assert_allclose(a.mean(axis=0), (10, 0, 0), atol=1e-6)
     np.testing.assert_allclose(b.mean(axis=0), (0, 10, 0), atol=1e-6)
     np.testing.assert_allclose(np.ptp(b, axis=0), (2, 0, 2), atol=1e-6)  # rotated upright
-    b_ids = np.unique(ex.scene.triangles[ex.scene.tri_object == ex.scene.object_names.index("B/Tile")])
-    np.testing.assert_allclose(ex.scene.normals[b_ids], [[0, -1, 0]] * 4, atol=1e-6)
+    b_normals = ex.scene.corner_normals[ex.scene.tri_object == ex.scene.object_names.index("B/Tile")]
+    np.testing.assert_allclose(b_normals.reshape(-1, 3), [[0, -1, 0]] * 6, atol=1e-6)
 
 
 def test_text_and_beveled_curve_are_converted_to_triangles():
@@ -207,7 +207,7 @@ def test_material_per_polygon_follows_material_index():
     ob.data.materials.append(material("Blue", **{"Base Color": (0, 0, 1, 1)}))
     ob.data.polygons[1].material_index = 1
     s = extract().scene
-    centre_x = s.positions[s.triangles].mean(axis=1)[:, 0]
+    centre_x = s.positions[s.triangles].mean(axis=1)[:, 0] + s.origin[0]
     np.testing.assert_allclose(s.albedo[centre_x < 1], [[1, 0, 0]] * 2)
     np.testing.assert_allclose(s.albedo[centre_x > 1], [[0, 0, 1]] * 2)
 
@@ -229,7 +229,7 @@ def test_image_texture_on_base_color_gives_the_texel_colours_under_each_triangle
                          np.float32)
     uv.uv.foreach_set("vector", corner_uv.ravel())
     s = extract().scene
-    centre_x = s.positions[s.triangles].mean(axis=1)[:, 0]
+    centre_x = s.positions[s.triangles].mean(axis=1)[:, 0] + s.origin[0]
     np.testing.assert_allclose(s.albedo[centre_x < 1], [[1, 0, 0]] * 2)
     np.testing.assert_allclose(s.albedo[centre_x > 1], [[0, 1, 0]] * 2)
 
@@ -296,13 +296,13 @@ def test_hard_edged_cube_splits_vertices_with_face_normals_and_smooth_sphere_doe
     sphere = next(t for t in ex.targets if t.object_name == "Sphere")
     cube_ids = np.unique(cube.corner_shading)
     assert len(cube_ids) == 24
-    n = s.normals[cube_ids]
+    n = ex.shading.normal[cube_ids]
     np.testing.assert_allclose(np.sort(np.abs(n), axis=1), [[0, 0, 1]] * 24, atol=1e-6)
     sphere_ids = np.unique(sphere.corner_shading)
     assert len(sphere_ids) == len(bpy.data.objects["Sphere"].data.vertices)
-    radial = s.positions[sphere_ids] - (4, 0, 0)
+    radial = ex.shading.position[sphere_ids] + s.origin - (4, 0, 0)
     radial /= np.linalg.norm(radial, axis=1, keepdims=True)
-    assert np.einsum("ij,ij->i", radial, s.normals[sphere_ids]).min() > 0.99
+    assert np.einsum("ij,ij->i", radial, ex.shading.normal[sphere_ids]).min() > 0.99
 
 
 def test_triangles_are_ccw_seen_from_their_normals_also_under_a_mirror():
@@ -312,7 +312,7 @@ def test_triangles_are_ccw_seen_from_their_normals_also_under_a_mirror():
     s = extract().scene
     p = s.positions[s.triangles]
     geometric = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    shading = s.normals[s.triangles].mean(axis=1)
+    shading = s.corner_normals.mean(axis=1)
     assert np.all(np.einsum("ij,ij->i", geometric, shading) > 0)
 
 
@@ -351,7 +351,8 @@ def test_geometry_nodes_instances_share_one_read_mesh_and_keep_their_matrices():
     ex = extract()
     s = ex.scene
     assert s.num_triangles == 3 * 12
-    centres = sorted(tuple(np.round(s.positions[np.unique(s.triangles[s.tri_object == k])].mean(0), 5))
+    centres = sorted(tuple(np.round(s.positions[np.unique(s.triangles[s.tri_object == k])].mean(0)
+                               + s.origin, 5))
                      for k in range(3))
     assert centres == [(0, 0, 0), (0, 5, 0), (5, 0, 0)]
     assert not any("no faces" in w for w in ex.warnings)
@@ -367,7 +368,7 @@ def test_receivers_limit_targets():
     ex = extract(receivers=[b])
     assert [t.object_name for t in ex.targets] == ["B"]
     assert sorted(ex.scene.object_names) == ["A", "B"]
-    corner_x = ex.scene.positions[ex.targets[0].corner_shading][:, 0]
+    corner_x = ex.shading.position[ex.targets[0].corner_shading][:, 0] + ex.scene.origin[0]
     assert corner_x.min() == pytest.approx(2.0) and corner_x.max() == pytest.approx(4.0)
 
 

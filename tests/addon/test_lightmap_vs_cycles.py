@@ -10,9 +10,8 @@ baked, except
   our leak guard moves samples within 0.7 texel of a block's side out of it on purpose, so that
   hidden darkness does not bleed into visible texels under bilinear filtering.
 The error over all texels both baked is recorded too. Figures go to
-bench/results/lightmap_vs_cycles.json.
+out/test-figures/lightmap_vs_cycles.json.
 """
-import json
 import time
 from pathlib import Path
 
@@ -24,8 +23,9 @@ from radiosity_baker.addon.cycles_ref import cycles_bake_image
 from radiosity_baker.addon.job import BakeJob
 from radiosity_baker.core import Settings, metrics
 
+import figures as figures_file
+
 ROOT = Path(__file__).resolve().parents[2]
-RESULTS = ROOT / "bench" / "results" / "lightmap_vs_cycles.json"
 CYCLES_SAMPLES = 1536
 MAX_SIZE = 128
 MAX_RMSE = 0.05
@@ -107,8 +107,7 @@ def test_cornell_lightmap_matches_a_cycles_image_bake(tmp_path):
                     "texel_indirect": settings.texel_indirect,
                     "interpolated": _figures(interpolated, reference)[0]})
     print(f"\nCornell lightmap vs Cycles: {figures}")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(figures, indent=2, sort_keys=True) + "\n")
+    figures_file.record("lightmap_vs_cycles", None, figures)
     assert (baked & left_out).sum() < 0.05 * baked.sum()
     assert figures["relative_rmse"] <= MAX_RMSE
     assert figures["interpolated"]["relative_rmse"] <= MAX_RMSE

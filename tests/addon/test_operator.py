@@ -9,6 +9,7 @@ import pytest
 from radiosity_baker.addon.job import BakeJob
 from radiosity_baker.core import BakeCancelled, Settings
 from radiosity_baker.core import settings as core_settings
+from radiosity_baker.core.solvers import SOLVERS
 
 from scenes import (GROUND, LIT, OCCLUDER, SHADOW, UNDER_LAMP, expected_point_lighting,
                     fast_settings, lit_ground, snapshot, value_at, vertex_colors)
@@ -47,7 +48,7 @@ def test_execute_with_selection_writes_only_selected_meshes(lit_scene):
     assert "Lighting" not in bpy.data.objects[GROUND].data.attributes
 
 
-@pytest.mark.parametrize("method", [m for m in core_settings.METHODS if m != "direct"])
+@pytest.mark.parametrize("method", [m for m, info in SOLVERS.items() if info.indirect])
 def test_execute_bakes_light_reflected_by_the_ground(lit_scene, method):
     # Turned to face the ground, the occluder sees no lamp: all its light bounced off the ground.
     bpy.data.objects[OCCLUDER].data.flip_normals()
@@ -105,7 +106,7 @@ def test_properties_mirror_every_settings_field():
     props = bpy.types.Scene.bl_rna.properties["radiosity_baker"].fixed_type.properties
     for f in fields(Settings):
         assert f.name in props, f"scene.radiosity_baker lacks {f.name}"
-    for name, choices in (("method", core_settings.METHODS), ("content", core_settings.CONTENTS),
+    for name, choices in (("method", tuple(SOLVERS)), ("content", core_settings.CONTENTS),
                           ("target", core_settings.TARGETS), ("device", core_settings.DEVICES)):
         assert tuple(i.identifier for i in props[name].enum_items) == choices
 

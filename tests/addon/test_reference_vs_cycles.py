@@ -3,9 +3,8 @@ Direct + Indirect, no Color).
 
 Tolerances (issue #3): relative RMSE of lighting ≤ 5 %, mean bias within ±2 %, over all vertices
 of the scene's receivers. The Cycles reference uses 2048 samples and 64 bounces; its own noise is
-part of the measured error. Figures are written to bench/results/reference_vs_cycles.json.
+part of the measured error. Figures are written to out/test-figures/reference_vs_cycles.json.
 """
-import json
 from pathlib import Path
 
 import bpy
@@ -15,8 +14,9 @@ from radiosity_baker.addon.compare import bake_vertex_values, stack
 from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
 from radiosity_baker.core import Settings, metrics
 
+import figures as figures_file
+
 ROOT = Path(__file__).resolve().parents[2]
-RESULTS = ROOT / "bench" / "results" / "reference_vs_cycles.json"
 CYCLES_SAMPLES = 2048
 MAX_RMSE, MAX_BIAS = 0.05, 0.02
 # Bunnell's one bounce misses the later ones (README, "Accuracy and speed"): most in the white
@@ -55,10 +55,7 @@ def test_reference_matches_cycles_on_sample_scene(blend):
     figures["bunnell"] = {**metrics.summary(stack(bunnell, names), stack(reference, names)),
                           "seconds": round(bunnell_seconds, 2)}
     print(f"\n{blend}: {figures}")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    table = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
-    table[blend] = figures
-    RESULTS.write_text(json.dumps(table, indent=2, sort_keys=True) + "\n")
+    figures_file.record("reference_vs_cycles", blend, figures)
     assert figures["relative_rmse"] <= MAX_RMSE
     assert abs(figures["mean_bias"]) <= MAX_BIAS
     max_rmse, low, high = BUNNELL[blend]

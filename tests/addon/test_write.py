@@ -14,6 +14,11 @@ def extract():
     return extract_scene(bpy.context.evaluated_depsgraph_get())
 
 
+def shading_world(ex):
+    """float64[S,3]: world positions of the extraction's shading vertices."""
+    return ex.shading.position + ex.scene.origin
+
+
 def colour_of(position):
     """A per-vertex value that identifies the vertex: float32[N,3] from world positions."""
     return (position * [0.1, 0.2, 0.3] + [1, 2, 3]).astype(np.float32)
@@ -43,7 +48,7 @@ def test_values_land_on_the_original_vertices():
     bpy.ops.object.shade_smooth()
     sphere = bpy.context.object
     ex = extract()
-    warnings = write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings())
+    warnings = write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
     assert warnings == []
     for ob in (cube, sphere):
         got = read_attribute(ob.data, "Lighting")
@@ -58,7 +63,7 @@ def test_vertex_value_is_the_mean_of_its_corners():
     cube = add_cube()
     ex = extract()
     # each shading vertex's value is its face's axis: |normal| = (1,0,0), (0,1,0) or (0,0,1)
-    values = np.abs(ex.scene.normals)
+    values = np.abs(ex.shading.normal)
     write_color_attributes(ex, values, "Lighting", Settings())
     # every cube vertex has three corners, one on a face of each axis: the mean is 1/3 each
     np.testing.assert_allclose(read_attribute(cube.data, "Lighting")[:, :3], 1 / 3, rtol=1e-6)
@@ -102,7 +107,7 @@ def test_other_attributes_uv_maps_images_and_materials_stay_identical():
     pixels_before = np.empty(64, np.float32)
     image.pixels.foreach_get(pixels_before)
     ex = extract()
-    write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings())
+    write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
     assert fingerprint(me) == before
     pixels_after = np.empty(64, np.float32)
     image.pixels.foreach_get(pixels_after)
@@ -119,7 +124,7 @@ def test_existing_attribute_of_that_name_is_overwritten_even_with_another_type()
         "color", np.full(len(me.vertices) * 4, 0.5, np.float32))
     me.color_attributes.active_color_name = "Other"
     ex = extract()
-    write_color_attributes(ex, np.full((ex.scene.num_vertices, 3), 2.0, np.float32), "Lighting",
+    write_color_attributes(ex, np.full((ex.shading.count, 3), 2.0, np.float32), "Lighting",
                            Settings())
     attr = me.attributes["Lighting"]
     assert (attr.domain, attr.data_type) == ("POINT", "FLOAT_COLOR")
@@ -127,7 +132,7 @@ def test_existing_attribute_of_that_name_is_overwritten_even_with_another_type()
     np.testing.assert_allclose(read_attribute(me, "Other"), 0.5)
     assert me.color_attributes.active_color_name == "Other"
     # a second bake overwrites in place
-    write_color_attributes(ex, np.full((ex.scene.num_vertices, 3), 3.0, np.float32), "Lighting",
+    write_color_attributes(ex, np.full((ex.shading.count, 3), 3.0, np.float32), "Lighting",
                            Settings())
     np.testing.assert_allclose(read_attribute(me, "Lighting")[:, :3], 3.0)
 
@@ -136,7 +141,7 @@ def test_topology_changing_modifier_is_skipped_with_a_warning():
     cube = add_cube()
     cube.modifiers.new("s", "SUBSURF").levels = 1
     ex = extract()
-    warnings = write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings())
+    warnings = write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
     assert warnings == ["Cube: its modifiers change the vertex count (26 evaluated vs 8 original); "
                         "apply the modifiers or enable 'Bake into copy' (--bake-copy)"]
     assert "Lighting" not in cube.data.attributes
@@ -147,7 +152,7 @@ def test_topology_changing_modifier_with_bake_copy_writes_into_a_copy():
     cube = add_cube(location=(0, 0, 5))
     cube.modifiers.new("s", "SUBSURF").levels = 1
     ex = extract()
-    warnings = write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting",
+    warnings = write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting",
                                       Settings(bake_copy=True))
     assert warnings == []
     copy = bpy.data.objects["Cube_baked"]
@@ -163,7 +168,7 @@ def test_rebake_into_copy_reuses_the_copy_and_leaves_it_out_of_the_scene():
     for _ in range(2):
         ex = extract()
         assert ex.scene.object_names == ["Cube"]  # the first bake's copy does not double it
-        write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings(bake_copy=True))
+        write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings(bake_copy=True))
     assert [ob.name for ob in bpy.data.objects] == ["Cube", "Cube_baked"]
     assert len(bpy.data.meshes) == 2
 
@@ -174,7 +179,7 @@ def test_shared_mesh_gets_the_average_and_a_warning():
     b.location = (2, 0, 0)
     bpy.context.scene.collection.objects.link(b)
     ex = extract()
-    warnings = write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings())
+    warnings = write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
     assert warnings == ["mesh Cube is shared by Cube, Twin: their results were averaged; make them "
                         "single-user for separate results"]
     expected = (colour_of(world_positions(a)) + colour_of(world_positions(b))) / 2
@@ -186,7 +191,7 @@ def test_vanished_object_writes_nothing():
     ex = extract()
     bpy.data.objects.remove(second)
     with pytest.raises(ValueError, match="Cube.001"):
-        write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings())
+        write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
     assert "Lighting" not in first.data.attributes
 
 
@@ -194,5 +199,5 @@ def test_reserved_attribute_name_is_refused_before_writing():
     cube = add_cube()
     ex = extract()
     with pytest.raises(ValueError, match="reserved"):
-        write_color_attributes(ex, colour_of(ex.scene.positions), "position", Settings())
+        write_color_attributes(ex, colour_of(shading_world(ex)), "position", Settings())
     assert len(cube.data.vertices) == 8 and "position" in cube.data.attributes

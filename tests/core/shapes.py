@@ -60,18 +60,18 @@ def lamp(kind: int, position=(0, 0, 0), direction=(0, 0, -1), size=(0.0, 0.0), s
 
 
 def scene(parts, lamps: Lamps | None = None) -> SceneData:
-    """SceneData from [(positions, normals, triangles, albedo rgb, emission rgb), ...]."""
+    """SceneData from [(positions, per-vertex normals, triangles, albedo rgb, emission rgb), ...]."""
     pos, nrm, tris, alb, emi, obj = [], [], [], [], [], []
     base = 0
     for k, (p, n, t, a, e) in enumerate(parts):
         pos.append(p)
-        nrm.append(n)
+        nrm.append(n[t])
         tris.append(t + base)
         alb.append(np.tile(np.asarray(a, np.float32), (len(t), 1)))
         emi.append(np.tile(np.asarray(e, np.float32), (len(t), 1)))
         obj.append(np.full(len(t), k, np.int32))
         base += len(p)
-    return SceneData(positions=np.concatenate(pos), normals=np.concatenate(nrm),
+    return SceneData(positions=np.concatenate(pos), corner_normals=np.concatenate(nrm),
                      triangles=np.concatenate(tris), tri_object=np.concatenate(obj),
                      albedo=np.concatenate(alb), emission=np.concatenate(emi),
                      lamps=lamps if lamps is not None else Lamps.empty(),

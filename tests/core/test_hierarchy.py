@@ -1,17 +1,12 @@
 """The disk tree: every element is one leaf, nodes bound and summarise their subtrees, the escape
 pointers give a complete depth-first traversal, refit tracks moved vertices like a rebuild."""
 import numpy as np
-import pytest
 
 import shapes
-from radiosity_baker.core import device as device_mod
-from radiosity_baker.core import direct, elements, hierarchy
-from radiosity_baker.core.solvers import ao
+from radiosity_baker.core import Settings, gather, hierarchy
+from radiosity_baker.core.problem import Problem
 
-
-@pytest.fixture(scope="module")
-def dev():
-    return device_mod.select("cpu")
+CPU = Settings(device="cpu")
 
 
 def _wavy_sheet(amplitude: float, n: int = 30):
@@ -36,15 +31,14 @@ def _scene(amplitude: float):
                          (*ball, (0.5,) * 3, (0,) * 3)])
 
 
-def _tree(scene, dev):
-    els = elements.build(scene)
-    geometry = direct.SceneGeometry(scene, dev)
-    return els, geometry, hierarchy.build(els, dev, geometry)
+def _tree(scene):
+    problem = Problem(scene, CPU)
+    return problem.elements, problem, problem.tree
 
 
 def _children(h):
     """Per node, its child range [first, end) (empty for leaves)."""
-    first = h.first_child.numpy()
+    first = h.nodes.first_child.numpy()
     end = np.full(h.count, -1)
     offs = h.level_offsets
     for lv in range(1, h.levels):
@@ -65,14 +59,16 @@ def _leaf_ranges(h):
     return lo, hi
 
 
-def test_every_element_is_one_leaf_and_the_root_holds_all_area(dev):
-    els, _, h = _tree(_scene(0.2), dev)
+def test_every_element_is_one_leaf_and_the_root_holds_all_area():
+    els, _, h = _tree(_scene(0.2))
     n = els.count
-    leaves = h.element.numpy()[:n]
+    leaves = h.nodes.element.numpy()[:n]
     assert np.array_equal(np.sort(leaves), np.arange(n))
-    assert (h.element.numpy()[n:] == -1).all()
-    assert (h.first_child.numpy()[:n] == -1).all() and (h.first_child.numpy()[n:] >= 0).all()
-    np.testing.assert_allclose(h.area.numpy()[h.root], els.area.sum(), rtol=1e-5)
+    assert (h.nodes.element.numpy()[n:] == -1).all()
+    first = h.nodes.first_child.numpy()
+    assert (first[:n] == -1).all() and (first[n:] >= 0).all()
+    assert h.nodes.root == h.root
+    np.testing.assert_allclose(h.nodes.area.numpy()[h.root], els.area.sum(), rtol=1e-5)
     assert h.levels <= hierarchy.MAX_LEVELS
     first, end = _children(h)
     above = np.arange(h.level_offsets[2], h.count)  # octree cells: 1 to 8 children each
@@ -81,15 +77,15 @@ def test_every_element_is_one_leaf_and_the_root_holds_all_area(dev):
     assert lo[h.root] == 0 and hi[h.root] == n
 
 
-def test_nodes_bound_and_summarise_their_subtrees(dev):
-    els, _, h = _tree(_scene(0.2), dev)
+def test_nodes_bound_and_summarise_their_subtrees():
+    els, _, h = _tree(_scene(0.2))
     n = els.count
-    leaf_el = h.element.numpy()[:n]
+    leaf_el = h.nodes.element.numpy()[:n]
     pos, area = els.position[leaf_el].astype(np.float64), els.area[leaf_el].astype(np.float64)
     nrm = els.normal[leaf_el].astype(np.float64)
     lo, hi = _leaf_ranges(h)
-    npos, nnrm, narea = h.position.numpy(), h.normal.numpy(), h.area.numpy()
-    nrad, nspread = h.radius.numpy(), h.spread.numpy()
+    npos, nnrm, narea = h.nodes.position.numpy(), h.nodes.normal.numpy(), h.nodes.area.numpy()
+    nrad, nspread = h.nodes.radius.numpy(), h.nodes.spread.numpy()
     for node in np.linspace(n, h.count - 1, 60).astype(int):  # a sample of inner nodes, root included
         s = slice(lo[node], hi[node])
         np.testing.assert_allclose(narea[node], area[s].sum(), rtol=1e-4)
@@ -102,9 +98,9 @@ def test_nodes_bound_and_summarise_their_subtrees(dev):
         assert reach.max() <= nrad[node] * (1 + 1e-5) + 1e-6
 
 
-def test_escape_pointers_give_a_complete_depth_first_traversal(dev):
-    _, _, h = _tree(_scene(0.2), dev)
-    first, nxt = h.first_child.numpy(), h.next.numpy()
+def test_escape_pointers_give_a_complete_depth_first_traversal():
+    _, _, h = _tree(_scene(0.2))
+    first, nxt = h.nodes.first_child.numpy(), h.nodes.next.numpy()
     seen = np.zeros(h.count, int)
     order = []
     node = h.root
@@ -119,18 +115,30 @@ def test_escape_pointers_give_a_complete_depth_first_traversal(dev):
     assert (position[first[inner]] == position[inner] + 1).all()
 
 
-def test_refit_after_moving_vertices_equals_a_rebuild(dev):
+def _world(problem, points):
+    """Points of ``problem``'s frame in world coordinates."""
+    return points + problem.scene.origin
+
+
+def _local(problem, world):
+    return (world - problem.scene.origin).astype(np.float32)
+
+
+def test_refit_after_moving_vertices_equals_a_rebuild():
     flat, moved = _scene(0.05), _scene(0.3)
-    els, geometry, h = _tree(flat, dev)
-    els_moved = elements.build(moved)
-    geometry.points.assign(moved.positions)
-    hierarchy.refit(h, els_moved.position, els_moved.normal, els_moved.area)
-    _, _, rebuilt = _tree(moved, dev)
-    np.testing.assert_allclose(h.area.numpy()[h.root], rebuilt.area.numpy()[rebuilt.root], rtol=1e-5)
-    np.testing.assert_allclose(h.position.numpy()[h.root], rebuilt.position.numpy()[rebuilt.root], atol=1e-5)
-    refitted = ao.gather(h, els_moved, els_moved.position, els_moved.normal, 10.0, dev).accessibility
-    fresh = ao.gather(rebuilt, els_moved, els_moved.position, els_moved.normal, 10.0, dev).accessibility
-    stale = ao.gather(_tree(flat, dev)[2], els, els_moved.position, els_moved.normal, 10.0, dev).accessibility
+    els, problem, h = _tree(flat)
+    problem.move(moved)
+    rebuilt = Problem(moved, CPU)
+    nodes, fresh_nodes = h.nodes, rebuilt.tree.nodes
+    np.testing.assert_allclose(nodes.area.numpy()[h.root], fresh_nodes.area.numpy()[rebuilt.tree.root], rtol=1e-5)
+    np.testing.assert_allclose(_world(problem, nodes.position.numpy()[h.root]),
+                               _world(rebuilt, fresh_nodes.position.numpy()[rebuilt.tree.root]), atol=1e-5)
+    world = _world(rebuilt, rebuilt.elements.position)
+    normals = rebuilt.elements.normal
+    refitted = gather.gather(problem, _local(problem, world), normals, 10.0).accessibility
+    fresh = gather.gather(rebuilt, _local(rebuilt, world), normals, 10.0).accessibility
+    stale_problem = Problem(flat, CPU)
+    stale = gather.gather(stale_problem, _local(stale_problem, world), normals, 10.0).accessibility
     # The two trees cluster differently (refit keeps the old Morton order), so they agree within
     # the tree's own approximation (test_ao: tree vs all pairs), not bit for bit.
     assert np.abs(refitted - fresh).mean() < 0.005
@@ -138,15 +146,15 @@ def test_refit_after_moving_vertices_equals_a_rebuild(dev):
     assert np.abs(stale - fresh).mean() > 0.02  # the motion matters: the test can fail
 
 
-def test_refit_keeps_exact_node_values_for_a_translation(dev):
+def test_refit_keeps_exact_node_values_for_a_translation():
     """A rigid translation keeps the Morton order: refit and rebuild give the same nodes."""
     sc = _scene(0.2)
-    els, geometry, h = _tree(sc, dev)
+    _, problem, h = _tree(sc)
     shift = np.array([0.5, -1.0, 2.0], np.float32)
     sc.positions = sc.positions + shift
-    geometry.points.assign(sc.positions)
-    hierarchy.refit(h, els.position + shift, els.normal, els.area)
-    _, _, rebuilt = _tree(sc, dev)
-    assert np.array_equal(h.element.numpy(), rebuilt.element.numpy())
-    np.testing.assert_allclose(h.position.numpy(), rebuilt.position.numpy(), atol=1e-5)
-    np.testing.assert_allclose(h.radius.numpy(), rebuilt.radius.numpy(), atol=1e-5)
+    problem.move(sc)
+    rebuilt = Problem(sc, CPU)
+    assert np.array_equal(h.nodes.element.numpy(), rebuilt.tree.nodes.element.numpy())
+    np.testing.assert_allclose(_world(problem, h.nodes.position.numpy()),
+                               _world(rebuilt, rebuilt.tree.nodes.position.numpy()), atol=1e-5)
+    np.testing.assert_allclose(h.nodes.radius.numpy(), rebuilt.tree.nodes.radius.numpy(), atol=1e-5)

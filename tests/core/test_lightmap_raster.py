@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import device, direct
+from radiosity_baker.core import Settings, device
+from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.lightmap import raster
 
 
@@ -53,14 +54,16 @@ def test_a_floor_texel_behind_a_wall_moves_in_front_of_it(dev):
     wn = np.tile([[-1, 0, 0]], (4, 1)).astype(np.float32)
     wt = np.array([[0, 2, 1], [0, 3, 2]], np.int32)
     sc = shapes.scene([(fp, fn, ft, (0.5,) * 3, (0,) * 3), (wp_, wn, wt, (0.5,) * 3, (0,) * 3)])
-    geometry = direct.SceneGeometry(sc, dev)
+    problem = Problem(sc, Settings(device="cpu"))
+    origin = problem.scene.origin.astype(np.float32)  # the problem's frame
     tri_pos = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]]] * 2, np.float32)
     tri_nrm = np.tile([0, 0, 1], (2, 3, 1)).astype(np.float32)
     # barycentrics of (0.01, 0.01) and (−0.3, −0.3) in the triangle (−1,−1), (1,−1), (1,1)
     bary = np.array([[0.495, 0.0, 0.505], [0.65, 0.0, 0.35]], np.float32)
     tx = raster.Texels(np.array([0, 1]), np.array([0, 1], np.int32), bary, 2, 1)
-    points, normals = raster.surface_points(tx, tri_pos, tri_nrm, np.full(2, 0.05, np.float32),
-                                            geometry, dev)
+    points, normals = raster.surface_points(tx, tri_pos - origin, tri_nrm, np.full(2, 0.05, np.float32),
+                                            problem)
+    points = points + origin
     assert points[0, 0] < 0.0 and abs(points[0, 0]) < 1e-3
     assert points[1, 0] == pytest.approx(-0.3, abs=2e-3)
     np.testing.assert_allclose(normals, [[0, 0, 1]] * 2, atol=1e-6)

@@ -25,6 +25,7 @@ def test_scene_without_triangles_is_a_clear_error():
     sc = lit_plane()
     sc.triangles = sc.triangles[:0]
     sc.tri_object, sc.albedo, sc.emission = sc.tri_object[:0], sc.albedo[:0], sc.emission[:0]
+    sc.corner_normals = sc.corner_normals[:0]
     with pytest.raises(BakeError, match="no triangles"):
         bake(sc, Settings())
 
@@ -42,6 +43,7 @@ def test_zero_area_triangles_are_ignored_with_a_warning():
     sc.tri_object = np.append(sc.tri_object, 0).astype(np.int32)
     sc.albedo = np.concatenate([sc.albedo, sc.albedo[:1]])
     sc.emission = np.concatenate([sc.emission, sc.emission[:1]])
+    sc.corner_normals = np.concatenate([sc.corner_normals, sc.corner_normals[:1]])
     r = bake(sc, Settings(method="direct"))
     assert any("zero-area" in w and "part0" in w for w in r.warnings)
     assert np.isfinite(r.lighting).all()

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake, device, direct, elements
+from radiosity_baker.core import Settings, bake
+from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.solvers.reference import Transport
 from radiosity_baker.core.scene import LAMP_POINT
 
@@ -69,10 +70,11 @@ def test_direct_method_matches_reference_direct_part():
 def patch_form_factors(part_a, part_b, **settings):
     """Area-weighted patch-to-patch form factors (F_AB, F_BA) and areas from the transport matrix."""
     sc = shapes.scene([part_a + ((0.5,) * 3, (0,) * 3), part_b + ((0.5,) * 3, (0,) * 3)])
-    dev = device.select("cpu")
-    els = elements.build(sc)
-    m = Transport(direct.SceneGeometry(sc, dev), els, Settings(visibility_rays=1, **settings), dev).build_whole()
-    na, a = len(part_a[0]), els.area.astype(np.float64)
+    problem = Problem(sc, Settings(visibility_rays=1, device="cpu", **settings))
+    transport = Transport(problem)
+    transport.build()
+    m = transport.matrix.numpy()
+    na, a = len(part_a[0]), problem.elements.area.astype(np.float64)
     f_ab = (a[:na, None] * m[:na, na:]).sum() / a[:na].sum()
     f_ba = (a[na:, None] * m[na:, :na]).sum() / a[na:].sum()
     return f_ab, f_ba, a[:na].sum(), a[na:].sum()
@@ -104,14 +106,27 @@ def test_form_factors_are_reciprocal_between_unequal_patches():
     assert a_a * f_ab == pytest.approx(a_b * f_ba, rel=0.01)
 
 
-def test_blocked_transport_gives_the_same_solution_as_the_held_matrix():
+def test_every_transport_mode_gives_the_same_solution_as_the_held_matrix():
+    """Within the memory budget the float32 matrix is held; below it the visibility alone (one
+    byte a pair, form factors recomputed each sweep); below that nothing (traced every sweep)."""
     scene = open_box_scene((0.6,) * 3)
     held = bake(scene, Settings(method="reference"))
     n = held.counts["elements"]
-    blocked = bake(scene, Settings(method="reference", max_pairs=n * 37))
-    assert held.counts["transport_held"] == 1 and blocked.counts["transport_held"] == 0
-    assert blocked.counts["block_rows"] == 37
-    np.testing.assert_allclose(blocked.indirect, held.indirect, rtol=2e-3, atol=1e-6)
+    assert held.counts["transport"] == "matrix"
+    for mode, pairs in (("visibility", n * n // 4), ("traced", n * n // 4 - 1)):
+        other = bake(scene, Settings(method="reference", max_pairs=pairs))
+        assert other.counts["transport"] == mode
+        np.testing.assert_allclose(other.indirect, held.indirect, rtol=2e-3, atol=1e-6)
+    assert other.counts["rays"] > held.counts["rays"]  # traced again every sweep
+
+
+def test_a_transport_larger_than_free_memory_is_refused_with_a_message(monkeypatch):
+    from radiosity_baker.core import device as device_mod
+    from radiosity_baker.core.errors import BakeError
+
+    monkeypatch.setattr(device_mod, "free_memory", lambda dev: 1000)
+    with pytest.raises(BakeError, match="GiB of memory are free: lower --max-pairs"):
+        bake(open_box_scene((0.5,) * 3), Settings(method="reference"))
 
 
 def test_bruteforce_is_another_name_for_the_reference_solver():

@@ -1,0 +1,162 @@
+"""The bake problem: built once per bake, shared by every stage and solver.
+
+It holds the scene (recentred: see ``SceneData.recentred``), the settings, the device, the stages
+(progress, cancellation, timings, warnings), the shading vertices and elements, and everything the
+kernels read, uploaded to the device once: the BVH of all triangles, the lights, and the elements
+as one ``Surfels`` struct. Direct light per element, the cluster tree and (for link-based
+solvers) links are computed the first time they are asked for and kept.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import cached_property
+
+import numpy as np
+import warp as wp
+
+from . import device as device_mod
+from . import direct as direct_mod
+from . import elements as elements_mod
+from .errors import BakeError
+from .scene import SceneData
+from .settings import Settings
+from .stages import Stages
+
+
+@wp.struct
+class Surfels:
+    """The elements and the triangles they stand for, as kernels read them.
+
+    mesh: BVH id of all triangles; points: vec3[V] vertex positions (m) and tris: int32[3T] flat
+    triangle corners (the BVH's own arrays); pos, nrm: vec3[n] element disks (m, unit); area:
+    float32[n] (m²); albedo, emission: vec3[n]; vertex: int32[n] the vertex each element sits on;
+    fan_offsets: int32[n+1] and fan_triangles: int32[≤3T], each element's triangles (CSR).
+    """
+
+    mesh: wp.uint64
+    points: wp.array(dtype=wp.vec3)
+    tris: wp.array(dtype=wp.int32)
+    pos: wp.array(dtype=wp.vec3)
+    nrm: wp.array(dtype=wp.vec3)
+    area: wp.array(dtype=wp.float32)
+    albedo: wp.array(dtype=wp.vec3)
+    emission: wp.array(dtype=wp.vec3)
+    vertex: wp.array(dtype=wp.int32)
+    fan_offsets: wp.array(dtype=wp.int32)
+    fan_triangles: wp.array(dtype=wp.int32)
+
+
+class Problem:
+    """One bake of ``scene`` with ``settings`` (validated here).
+
+    scene: the recentred SceneData; shading: ``elements.ShadingVertices``; elements:
+    ``elements.Elements`` (host arrays); surfels: the same on the device (``Surfels``); mesh: the
+    ``wp.Mesh`` BVH; lights: ``direct.Lights``; far: a length (m) beyond the scene; stages:
+    ``core.stages.Stages``; counts: what was made and traced, for the report.
+    """
+
+    def __init__(self, scene: SceneData, settings: Settings, stages: Stages | None = None):
+        self.settings = settings.validate()
+        self.stages = stages if stages is not None else Stages()
+        try:
+            scene.validate()
+        except ValueError as exc:
+            raise BakeError(str(exc)) from None
+        if scene.num_triangles == 0:
+            raise BakeError("nothing to bake: the scene has no triangles")
+        self.scene = scene = scene.recentred()
+        st = self.stages
+        self.device = st.run("device", device_mod.select, settings.device)
+        st.run("kernels", device_mod.load_kernels, self.device,
+               lambda: st.report("compiling kernels (first bake only, cached afterwards)", 0.0))
+        degenerate = ~(scene.triangle_areas() > 0)
+        if degenerate.any():
+            names = sorted({scene.object_names[i] for i in np.unique(scene.tri_object[degenerate])})
+            st.warn(f"{int(degenerate.sum())} zero-area triangles ignored in {', '.join(names)}")
+        self.shading = st.run("elements", elements_mod.shading_vertices, scene)
+        self.elements = els = st.run("elements", elements_mod.build, scene, self.shading)
+        d = self.device.name
+        self.mesh = st.run("bvh", _mesh, scene, d)
+        self.lights = st.run("bvh", direct_mod.Lights, scene, self.device)
+        extent = float(np.linalg.norm(scene.positions.max(axis=0) - scene.positions.min(axis=0))) or 1.0
+        self.far = extent * 1e3 + 1e3
+        s = Surfels()
+        s.mesh = self.mesh.id
+        s.points = self.mesh.points
+        s.tris = self.mesh.indices
+        s.pos = wp.array(els.position, dtype=wp.vec3, device=d)
+        s.nrm = wp.array(els.normal, dtype=wp.vec3, device=d)
+        s.area = wp.array(els.area, dtype=wp.float32, device=d)
+        s.albedo = wp.array(els.albedo, dtype=wp.vec3, device=d)
+        s.emission = wp.array(els.emission, dtype=wp.vec3, device=d)
+        s.vertex = wp.array(els.vertex, dtype=wp.int32, device=d)
+        s.fan_offsets = wp.array(els.fan_offsets, dtype=wp.int32, device=d)
+        s.fan_triangles = wp.array(els.fan_triangles, dtype=wp.int32, device=d)
+        self.surfels = s
+        self.counts = {"objects": len(scene.object_names), "triangles": scene.num_triangles,
+                       "vertices": scene.num_vertices, "shading_vertices": self.shading.count,
+                       "elements": els.count, "lamps": len(scene.lamps),
+                       "emissive_triangles": self.lights.num_emitters, "rays": 0}
+
+    def move(self, scene: SceneData) -> None:
+        """Take the positions, normals, materials and lamps of ``scene`` — the same triangles and
+        vertices, deformed or moved (an animation frame) — keeping this problem's frame, device
+        arrays and BVH (refitted), and the tree (refitted) if built. Direct light is traced again
+        when next asked for."""
+        if (scene.num_vertices, scene.num_triangles) != (self.scene.num_vertices, self.scene.num_triangles):
+            raise BakeError("the scene's topology changed: build a new problem")
+        try:
+            scene.validate()
+        except ValueError as exc:
+            raise BakeError(str(exc)) from None
+        shift = np.asarray(scene.origin, np.float64) - self.scene.origin
+        positions = (np.asarray(scene.positions, np.float64) + shift).astype(np.float32)
+        lamps = replace(scene.lamps, position=(np.asarray(scene.lamps.position, np.float64)
+                                                + shift).astype(np.float32))
+        self.scene = scene = replace(scene, positions=positions, lamps=lamps, origin=self.scene.origin)
+        self.shading = elements_mod.shading_vertices(scene)
+        if self.shading.count != self.elements.count:
+            raise BakeError("the scene's shading topology changed: build a new problem")
+        self.elements = els = elements_mod.build(scene, self.shading)
+        self.mesh.points.assign(positions)
+        self.mesh.refit()
+        self.lights = direct_mod.Lights(scene, self.device)
+        s = self.surfels
+        for name in ("pos", "nrm", "albedo", "emission"):
+            getattr(s, name).assign(getattr(els, {"pos": "position", "nrm": "normal"}.get(name, name)))
+        s.area.assign(els.area)
+        self.__dict__.pop("direct", None)
+        if "tree" in self.__dict__:
+            from . import hierarchy
+
+            hierarchy.refit(self.tree, s)
+
+    @property
+    def element_sizes(self) -> np.ndarray:
+        """float32[n]: each element's size √area (m), its local feature size for ray offsets."""
+        return np.sqrt(self.elements.area)
+
+    @cached_property
+    def direct(self) -> np.ndarray:
+        """float32[n,3]: direct lighting (irradiance/π) at each element, traced once."""
+        els = self.elements
+        light, rays = self.stages.run("direct", direct_mod.direct_lighting, self, els.position,
+                                      els.normal, self.element_sizes, self.stages.reporter("direct"))
+        self.counts["rays"] += rays
+        return light
+
+    @cached_property
+    def tree(self):
+        """The cluster tree over the elements (``hierarchy.Tree``), built once."""
+        from . import hierarchy
+
+        tree = self.stages.run("hierarchy", hierarchy.build, self)
+        self.counts["nodes"] = tree.count
+        return tree
+
+
+def _mesh(scene: SceneData, device: str) -> wp.Mesh:
+    points = wp.array(np.ascontiguousarray(scene.positions, np.float32), dtype=wp.vec3, device=device)
+    indices = wp.array(np.ascontiguousarray(scene.triangles, np.int32).reshape(-1), dtype=wp.int32,
+                       device=device)
+    return wp.Mesh(points=points, indices=indices)

@@ -1,0 +1,50 @@
+"""What solvers share: their solution and the mapping of per-element values to receivers."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Solution:
+    """values: float32[n,3] per element (indirect lighting, irradiance/π, for light solvers;
+    accessibility in all three channels for AO); counts: what the solve made and traced
+    (iterations, rays, pairs …) for the report; cache: what ``evaluate`` computes once per
+    solution and reuses (e.g. a final gather's sender radiance)."""
+
+    values: np.ndarray
+    counts: dict = field(default_factory=dict)
+    cache: dict = field(default_factory=dict)
+
+
+def reconstruct(problem, solution: Solution, receivers) -> np.ndarray:
+    """float32[R,3]: the solution interpolated at ``receivers`` (their element weights)."""
+    return receivers.reconstruct(solution.values)
+
+
+def reconstruct_with_detail(problem, solution: Solution, receivers) -> np.ndarray:
+    """float32[R,3] indirect lighting at ``receivers``: the solution itself where they are the
+    elements; elsewhere (lightmap texels) interpolated from the elements, plus — with
+    ``texel_indirect`` ``gather`` — what a final gather over the tree finds at each receiver beyond
+    the same gather interpolated from the elements: detail finer than the mesh (contact shadows,
+    bleeding), while the solver's accuracy at the elements is kept (the gather's own error,
+    mostly smooth, cancels)."""
+    values = receivers.reconstruct(solution.values)
+    if receivers.aligned or problem.settings.texel_indirect != "gather" or not len(values):
+        return values
+    from .. import gather
+
+    stages = problem.stages
+    if "final_gather" not in solution.cache:
+        lighting = problem.direct + solution.values
+        radiance = stages.run("final gather", gather.sender_radiance, problem, lighting)
+        els = problem.elements
+        at_elements = stages.run("final gather", gather.light_at, problem, radiance, els.position,
+                                 els.normal)
+        solution.cache["final_gather"] = (radiance, at_elements)
+    radiance, at_elements = solution.cache["final_gather"]
+    detail = stages.run("texel gather", gather.light_at, problem, radiance, receivers.points,
+                        receivers.normals, stages.reporter("texel gather"))
+    detail -= receivers.reconstruct(at_elements)
+    return np.maximum(values + detail, 0.0).astype(np.float32)
