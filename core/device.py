@@ -13,6 +13,8 @@ from typing import Callable, Optional
 
 import warp as wp
 
+from .errors import SettingsError
+
 _initialised = False
 
 
@@ -39,12 +41,12 @@ class Device:
 
 
 def select(preference: str = "auto") -> Device:
-    """Pick the device: "cuda" (error if none is usable), "cpu", or "auto" (CUDA when usable)."""
+    """Pick the device: "cuda" (SettingsError if none is usable), "cpu", or "auto" (CUDA when usable)."""
     init_warp()
     cuda = wp.get_cuda_device_count() > 0
     if preference == "cuda" and not cuda:
-        raise RuntimeError("device 'cuda' requested but Warp found no usable CUDA GPU "
-                           "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
+        raise SettingsError("device 'cuda' requested but Warp found no usable CUDA GPU "
+                            "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
     if preference in ("cuda", "auto") and cuda:
         return Device("cuda:0", 1)
     return Device("cpu", max(1, os.cpu_count() or 1))

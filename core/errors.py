@@ -7,3 +7,7 @@ class BakeError(RuntimeError):
 
 class BakeCancelled(RuntimeError):
     """The user cancelled the bake; nothing was written."""
+
+
+class SettingsError(BakeError, ValueError):
+    """A setting out of range; the message names it."""

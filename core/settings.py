@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
+from .errors import SettingsError
+
 METHODS = ("direct", "reference", "bunnell")
 # Older name of the reference solver, still accepted.
 METHOD_ALIASES = {"bruteforce": "reference"}
@@ -85,29 +87,29 @@ class Settings:
     pack_images: bool = False
 
     def validate(self) -> "Settings":
-        """Raise ValueError with a clear message for an out-of-range setting; return self."""
+        """Raise SettingsError with a clear message for an out-of-range setting; return self."""
         for name, allowed in (("method", METHODS + tuple(METHOD_ALIASES)), ("content", CONTENTS), ("target", TARGETS),
                               ("device", DEVICES), ("layout", LAYOUTS), ("hookup", HOOKUPS),
                               ("lightmap_format", LIGHTMAP_FORMATS), ("texel_indirect", TEXEL_INDIRECT)):
             value = getattr(self, name)
             if value not in allowed:
-                raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {value!r}")
+                raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}")
         if not self.attribute or not self.attribute.strip():
-            raise ValueError("attribute name must not be empty")
+            raise SettingsError("attribute name must not be empty")
         for name in ("light_samples", "visibility_rays", "bounces", "max_pairs"):
             if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be at least 1, not {getattr(self, name)}")
+                raise SettingsError(f"{name} must be at least 1, not {getattr(self, name)}")
         for name, low in (("max_size", 16), ("padding", 1), ("supersample", 1)):
             if getattr(self, name) < low:
-                raise ValueError(f"{name} must be at least {low}, not {getattr(self, name)}")
+                raise SettingsError(f"{name} must be at least {low}, not {getattr(self, name)}")
         if not self.texel_density > 0.0:
-            raise ValueError(f"texel_density must be positive, not {self.texel_density}")
+            raise SettingsError(f"texel_density must be positive, not {self.texel_density}")
         if self.target != "vertex_colors" and not self.output.strip():
-            raise ValueError("output folder must not be empty when baking lightmaps")
+            raise SettingsError("output folder must not be empty when baking lightmaps")
         if not self.ao_distance >= 0.0:
-            raise ValueError(f"ao_distance must be at least 0, not {self.ao_distance}")
+            raise SettingsError(f"ao_distance must be at least 0, not {self.ao_distance}")
         if not 0.0 < self.tolerance < 1.0:
-            raise ValueError(f"tolerance must be in (0, 1), not {self.tolerance}")
+            raise SettingsError(f"tolerance must be in (0, 1), not {self.tolerance}")
         return self
 
     @property

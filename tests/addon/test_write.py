@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from radiosity_baker.addon.extract import extract_scene
+from radiosity_baker.addon.outputs import OutputError
 from radiosity_baker.addon.write import write_color_attributes
 from radiosity_baker.core.settings import Settings
 
@@ -138,7 +139,7 @@ def test_topology_changing_modifier_is_skipped_with_a_warning():
     ex = extract()
     warnings = write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings())
     assert warnings == ["Cube: its modifiers change the vertex count (26 evaluated vs 8 original); "
-                        "apply the modifiers or enable 'Bake into copy' (--bake-copy)"]
+                        "apply the modifiers or enable 'Bake Copy' (--bake-copy)"]
     assert "Lighting" not in cube.data.attributes
     assert "Cube_baked" not in bpy.data.objects
 
@@ -185,7 +186,7 @@ def test_vanished_object_writes_nothing():
     first, second = add_cube(), add_cube(location=(3, 0, 0))
     ex = extract()
     bpy.data.objects.remove(second)
-    with pytest.raises(ValueError, match="Cube.001"):
+    with pytest.raises(OutputError, match="Cube.001"):
         write_color_attributes(ex, colour_of(ex.scene.positions), "Lighting", Settings())
     assert "Lighting" not in first.data.attributes
 
@@ -193,6 +194,6 @@ def test_vanished_object_writes_nothing():
 def test_reserved_attribute_name_is_refused_before_writing():
     cube = add_cube()
     ex = extract()
-    with pytest.raises(ValueError, match="reserved"):
+    with pytest.raises(OutputError, match="reserved"):
         write_color_attributes(ex, colour_of(ex.scene.positions), "position", Settings())
     assert len(cube.data.vertices) == 8 and "position" in cube.data.attributes
