@@ -178,6 +178,8 @@ def _bake(args) -> int:
         raise UsageError(f"no such .blend file: {args.blend}")
     outputs = {name: getattr(args, name).resolve() for name in ("save", "report", "preview")
                if getattr(args, name) is not None}
+    if len(set(outputs.values())) < len(outputs):
+        raise UsageError(f"{', '.join('--' + name for name in outputs)} must name different files")
     for path in outputs.values():
         check_file(path)
     device.select(settings.device)  # --device cuda without a GPU: a bad argument, said now
