@@ -131,7 +131,8 @@ class Staging:
                     os.replace(temp, target)
                 except OSError:
                     if old is not None:
-                        old.unlink()
+                        with contextlib.suppress(OSError):
+                            old.unlink()
                     raise
                 replaced.append((target, existed, old))
         except OSError as exc:

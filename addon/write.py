@@ -90,7 +90,7 @@ class ColorWrites:
 
 
 def _resolve(extraction: Extraction, attribute_name: str, settings, context):
-    """(target, object, mesh to write or None, copy source or None) per target, and warnings.
+    """(target, its object, whether it is written into a copy) per target written, and warnings.
 
     Raises OutputError for a reserved name, a vanished or changed object, or a name clash.
     """
@@ -110,12 +110,12 @@ def _resolve(extraction: Extraction, attribute_name: str, settings, context):
                     f"enable 'Bake Copy' (--bake-copy)")
                 continue
             depsgraph = depsgraph or (context or bpy.context).evaluated_depsgraph_get()
-            mesh, source = ob.evaluated_get(depsgraph).data, ob  # what the copy will hold
+            mesh = ob.evaluated_get(depsgraph).data  # what the copy will hold
         elif ob.data.library is not None:
             warnings.append(f"{ob.name}: mesh {ob.data.name} is linked from a library: not written")
             continue
         else:
-            mesh, source = ob.data, None
+            mesh = ob.data
         if len(mesh.vertices) != target.num_vertices:
             raise OutputError(f"{ob.name} changed during the bake ({len(mesh.vertices)} vertices, "
                               f"{target.num_vertices} baked): nothing written")
@@ -124,7 +124,7 @@ def _resolve(extraction: Extraction, attribute_name: str, settings, context):
             raise OutputError(f"{ob.name}: mesh {ob.data.name} already has {clash} named "
                               f"{attribute_name!r}, which a color attribute cannot replace: choose "
                               f"another attribute name")
-        out.append((target, ob, None if source is not None else mesh, source))
+        out.append((target, ob, target.topology_changed))
     return out, warnings
 
 
@@ -147,13 +147,13 @@ def prepare_color_attributes(extraction: Extraction, values, attribute_name: str
     writes: list[_Write] = []
     shared: dict[str, list] = {}  # mesh name -> [(object name, rgb)]
     meshes = {}
-    for target, ob, mesh, source in resolved:
+    for target, ob, into_copy in resolved:
         rgb = _per_vertex(target, values)
-        if source is not None:
-            writes.append(_Write(_rgba(rgb), source=source))
+        if into_copy:
+            writes.append(_Write(_rgba(rgb), source=ob))
             continue
-        meshes[mesh.name] = mesh
-        shared.setdefault(mesh.name, []).append((ob.name, rgb))
+        meshes[ob.data.name] = ob.data
+        shared.setdefault(ob.data.name, []).append((ob.name, rgb))
 
     for mesh_name, items in shared.items():
         if len(items) > 1:
