@@ -466,6 +466,22 @@ def test_an_internal_error_shows_its_traceback_and_one_line(blend, tmp_path, cap
     assert run.err[-1] == "radiosity_baker: error: internal error: ValueError: a bug"
 
 
+def test_an_internal_error_in_the_operator_says_so_and_prints_its_traceback(blend, capsys,
+                                                                            monkeypatch):
+    from radiosity_baker.addon import job as job_module
+
+    def broken(*args, **kwargs):
+        raise ValueError("a bug")
+
+    monkeypatch.setattr(job_module.core, "bake", broken)
+    fast_settings(bpy.context.scene)
+    before = user_data()
+    with pytest.raises(RuntimeError, match="internal error: ValueError: a bug"):
+        bpy.ops.object.radiosity_bake(use_selected=False)
+    assert "Traceback (most recent call last):" in capsys.readouterr().err
+    assert user_data() == before
+
+
 # ------------------------------------------------------------------------------------------------
 # cases that bake: only what was asked for changes
 
@@ -537,3 +553,4 @@ def test_the_same_save_twice(blend, tmp_path, capsys):
     assert data_of(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.blend", "out.blend", "out.blend1",
                                                           "r.json"]
+
