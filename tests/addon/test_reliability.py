@@ -422,13 +422,22 @@ def test_objects_naming_nothing_to_write_are_errors(blend, tmp_path, capsys, obj
           tmp_path / "out.blend", started=False)
 
 
-def test_ctrl_c_is_one_line_and_status_130(blend, tmp_path, capsys, monkeypatch):
+@pytest.fixture
+def bake_raises(monkeypatch):
+    """``bake_raises(exc)``: the bake itself (core.bake, as the job calls it) raises ``exc``."""
     from radiosity_baker.addon import job as job_module
 
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
+    def arm(exc):
+        def bake(*args, **kwargs):
+            raise exc
 
-    monkeypatch.setattr(job_module.core, "bake", interrupted)
+        monkeypatch.setattr(job_module.core, "bake", bake)
+
+    return arm
+
+
+def test_ctrl_c_is_one_line_and_status_130(blend, tmp_path, capsys, bake_raises):
+    bake_raises(KeyboardInterrupt())
     digest = sha(blend)
     try:
         run = bake(capsys, blend, *FAST, "--save", tmp_path / "new" / "out.blend")
@@ -454,26 +463,16 @@ def test_ctrl_c_of_a_real_process(tmp_path):
     assert "Traceback" not in err and not out.exists() and list(tmp_path.iterdir()) == []
 
 
-def test_an_internal_error_shows_its_traceback_and_one_line(blend, tmp_path, capsys, monkeypatch):
-    from radiosity_baker.addon import job as job_module
-
-    def broken(*args, **kwargs):
-        raise ValueError("a bug")
-
-    monkeypatch.setattr(job_module.core, "bake", broken)
+def test_an_internal_error_shows_its_traceback_and_one_line(blend, capsys, bake_raises):
+    bake_raises(ValueError("a bug"))
     run = bake(capsys, blend, *FAST)
     assert run.status == 1 and "Traceback (most recent call last):" in run.err
     assert run.err[-1] == "radiosity_baker: error: internal error: ValueError: a bug"
 
 
 def test_an_internal_error_in_the_operator_says_so_and_prints_its_traceback(blend, capsys,
-                                                                            monkeypatch):
-    from radiosity_baker.addon import job as job_module
-
-    def broken(*args, **kwargs):
-        raise ValueError("a bug")
-
-    monkeypatch.setattr(job_module.core, "bake", broken)
+                                                                            bake_raises):
+    bake_raises(ValueError("a bug"))
     fast_settings(bpy.context.scene)
     before = user_data()
     with pytest.raises(RuntimeError, match="internal error: ValueError: a bug"):
