@@ -3,7 +3,10 @@
 
 Settings start from core ``Settings`` defaults; the options below override them. The input file
 is never written: results reach disk only through ``--save`` (which may name the input on purpose).
-Exit status: 0 done, 1 the bake failed, 2 bad arguments or unreadable input / unwritable output.
+Every output is written under a temporary name beside its target, checked, and moved into place
+with the others at the end, so a failed bake or a full disk leaves the targets as they were.
+Exit status: 0 done, 1 the bake failed, 2 bad arguments or unreadable input / unwritable output,
+130 cancelled (Ctrl-C).
 """
 from __future__ import annotations
 
@@ -12,16 +15,19 @@ import json
 import os
 import platform
 import sys
-import tempfile
 import time
+import traceback
 from dataclasses import fields
 from pathlib import Path
 
 import bpy
 
-from ..core import BakeCancelled, Settings
+from ..core import BakeCancelled, Settings, device
 from ..core import settings as core_settings
+from ..core.errors import SettingsError
+from ..core.lightmap import files
 from .job import USER_ERRORS, BakeJob
+from .outputs import OutputError, Staging, check_file
 
 PROG = "radiosity_baker"
 _ROOT = Path(__file__).resolve().parent.parent  # the repository / extension folder
@@ -110,29 +116,33 @@ def main(argv: list[str]) -> int:
         return exc.code or 0
     try:
         return _bake(args)
-    except UsageError as exc:
+    except (UsageError, SettingsError, OutputError) as exc:
         return _error(str(exc), 2)
-    except BakeCancelled:
-        return _error("bake cancelled: nothing was written", 1)
+    except (BakeCancelled, KeyboardInterrupt):
+        print(f"{PROG}: bake cancelled", file=sys.stderr)  # outputs were left as they were
+        return 130
     except USER_ERRORS as exc:
         return _error(str(exc), 1)
-    except Exception as exc:  # noqa: BLE001 - a bug: still one line, and Blender stays open
+    except Exception as exc:  # noqa: BLE001 - a bug: its traceback, then one line; Blender stays open
+        traceback.print_exc()
         return _error(f"internal error: {type(exc).__name__}: {exc}", 1)
 
 
 def _bake(args) -> int:
     settings = Settings(**{f.name: getattr(args, f.name) for f in fields(Settings)})
-    try:
-        settings.validate()
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    settings.validate()
+    if args.objects is not None and not args.objects:
+        raise UsageError("--objects names no object")
     blend = Path(args.blend).resolve()
     if not blend.is_file():
         raise UsageError(f"no such .blend file: {args.blend}")
     outputs = {name: getattr(args, name).resolve() for name in ("save", "report", "preview")
                if getattr(args, name) is not None}
+    if len(set(outputs.values())) < len(outputs):
+        raise UsageError(f"{', '.join('--' + name for name in outputs)} must name different files")
     for path in outputs.values():
-        _check_writable(path)
+        check_file(path)
+    device.select(settings.device)  # --device cuda without a GPU: a bad argument, said now
     try:
         bpy.ops.wm.open_mainfile(filepath=str(blend))
     except RuntimeError as exc:
@@ -146,39 +156,77 @@ def _bake(args) -> int:
             print(f"{PROG}: warning: {message}", file=sys.stderr, flush=True)
 
     job = BakeJob(settings, args.objects, progress=_Progress(), notify=warn)
-    for message in job.run_sync(bpy.context):
-        warn(message)
-
-    if "save" in outputs:
-        try:
-            bpy.ops.wm.save_as_mainfile(filepath=str(outputs["save"]), copy=True)
-        except RuntimeError as exc:
-            raise UsageError(f"cannot save {outputs['save']}: {_first_line(exc)}") from None
-    if "preview" in outputs:  # after saving: the file never holds the preview's temporary data
-        from .preview import render_preview
-        render_preview(bpy.context.scene, settings.attribute, outputs["preview"])
-    if "report" in outputs:
-        report = _report(job, settings, str(blend), {k: str(v) for k, v in outputs.items()})
-        outputs["report"].write_text(json.dumps(report, indent=2) + "\n")
+    with Staging() as staging:
+        for message in job.run_sync(bpy.context):
+            warn(message)
+        if "save" in outputs:
+            _save(staging, outputs["save"])
+        if "preview" in outputs:  # after saving: the file never holds the preview's temporary data
+            from .preview import render_preview
+            with staging.writing(outputs["preview"]) as temp:
+                render_preview(bpy.context.scene, settings.attribute, temp)
+                files.verify(temp)
+        if "report" in outputs:
+            report = _report(job, settings, str(blend), {k: str(v) for k, v in outputs.items()})
+            with staging.writing(outputs["report"]) as temp:
+                _write_verified(temp, (json.dumps(report, indent=2) + "\n").encode())
+        staging.commit()
     result = job.result
     print(f"{PROG}: baked {result.counts.get('elements', 0)} elements on {result.device} "
           f"in {job.seconds:.2f} s")
     return 0
 
 
-def _check_writable(path: Path) -> None:
-    """Raise UsageError unless a file can be created at ``path`` (checked before baking); missing
-    parent folders are created."""
-    if path.is_dir():
-        raise UsageError(f"cannot write {path}: it is a directory")
-    if path.exists() and not os.access(path, os.W_OK):
-        raise UsageError(f"cannot write {path}: permission denied")
-    try:  # creating a file is the only test that holds for every file system and user
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".radiosity_baker_"):
+# A whole .blend file ends with an ENDB block (its code, then a header of zeros: 16 bytes or more)
+# or, compressed (zstd, as Blender writes by default), with the magic number of its seek table.
+_BLEND_START, _ZSTD_START, _ZSTD_END = b"BLENDER", b"\x28\xb5\x2f\xfd", b"\xb1\xea\x92\x8f"
+
+
+def _save(staging: Staging, target: Path) -> None:
+    """Save the open file as a copy at ``target`` (the session keeps its own path) through a
+    temporary file that is checked before it replaces ``target``; the file replaced is kept as
+    ``target1`` … as Blender's Save Versions preference says."""
+    with staging.writing(target, versions=bpy.context.preferences.filepaths.save_version) as temp:
+        try:
+            bpy.ops.wm.save_as_mainfile(filepath=str(temp), copy=True)
+        except RuntimeError as exc:
+            raise OutputError(f"cannot save {target}: {_first_line(exc)}") from None
+        if not _whole_blend(temp):  # Blender reports success even when the disk filled up
+            raise OutputError(f"cannot save {target}: the file written is incomplete "
+                              f"(is the disk full?)")
+
+
+def _whole_blend(path: Path) -> bool:
+    """Whether ``path`` is a whole .blend file: its first and last bytes, then a read of its block
+    list (what Blender does to link from it, without touching the open file)."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(len(_BLEND_START))
+        f.seek(max(0, size - 64))
+        tail = f.read()
+    if head == _BLEND_START:
+        end = tail.rfind(b"ENDB")
+        whole = end >= 0 and len(tail) - end - 4 >= 16 and not tail[end + 4:].strip(b"\0")
+    else:
+        whole = head.startswith(_ZSTD_START) and tail.endswith(_ZSTD_END)
+    if not whole:
+        return False
+    try:
+        with bpy.data.libraries.load(str(path)):
             pass
-    except OSError as exc:
-        raise UsageError(f"cannot write {path}: {exc.strerror or exc}") from None
+    except OSError:
+        return False
+    return True
+
+
+def _write_verified(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path``, flushed to the disk, and check its size (OSError on failure)."""
+    with open(path, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    if path.stat().st_size != len(data):
+        raise OSError(f"{path.stat().st_size} of {len(data)} bytes written")
 
 
 def _first_line(exc: BaseException) -> str:

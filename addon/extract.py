@@ -24,6 +24,9 @@ from ..core.scene import (LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SHAPE_ELLI
 # The depsgraph hands the non-mesh ones out already converted, as a mesh instance of themselves.
 _SURFACE_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 _GREY = (0.8, 0.8, 0.8)
+# A coordinate (m) beyond this is taken for infinite: Blender stores an infinite one as FLT_MAX
+# (3.4e38), and squared distances overflow float32 from about 1.8e19 m.
+_LARGEST_COORDINATE = 1e18
 # Custom property on an object made by realize_copy: the name of the object it was made from.
 COPY_SOURCE_PROPERTY = "radiosity_baker_source"
 # Barycentric points averaged when an image texture is sampled over a triangle: the centroid and
@@ -146,7 +149,9 @@ class _Materials:
         return fallback
 
     def _colour(self, mat, socket):
-        """RGB tuple of an unlinked socket, a _Texture for a linked Image Texture."""
+        """RGB tuple of an unlinked socket, a _Texture for a linked Image Texture (read through
+        the Multiply node of a lightmap hook-up: the material's own colour)."""
+        socket = _before_lightmap_multiply(socket)
         node = _linked_node(socket)
         constant = tuple(socket.default_value[:3])
         if node is None:
@@ -243,6 +248,24 @@ def _linked_node(socket):
     return None
 
 
+def _before_lightmap_multiply(socket):
+    """The socket that held ``socket``'s value before ``--hookup multiply`` put its Multiply node in
+    between (its A input, which took over the link or the value); ``socket`` itself otherwise."""
+    from .lightmap import NODE_MULTIPLY  # that module imports this one
+
+    node = _linked_node(socket)
+    while node is not None and node.name == NODE_MULTIPLY:
+        socket = next(s for s in node.inputs if s.identifier == "A_Color")
+        node = _linked_node(socket)
+    return socket
+
+
+def _within_range(values: np.ndarray) -> bool:
+    """Whether every coordinate of ``values`` is a number within ±_LARGEST_COORDINATE (m): NaN,
+    infinite and FLT_MAX ones are not (compared without numpy warnings)."""
+    return bool((np.abs(values) <= _LARGEST_COORDINATE).all())
+
+
 def _render_uv_name(me):
     for layer in me.uv_layers:
         if layer.active_render:
@@ -312,7 +335,7 @@ def _read_mesh(me, materials: list, palette: _Materials, object_name: str):
     if nt == 0:
         return None
     positions = _read_attribute(me, "position", nv, 3, np.float32, ("vertices", "co"))
-    if not _finite(positions):
+    if not _within_range(positions):
         raise ExtractionError(f"object {object_name} has NaN or infinite vertex positions")
     corner_vert = _read_attribute(me, ".corner_vert", nc, 1, np.int32, ("loops", "vertex_index"))
     loops = np.empty(nt * 3, np.int32)
@@ -333,12 +356,6 @@ def _read_mesh(me, materials: list, palette: _Materials, object_name: str):
                      corner_vert=corner_vert, num_vertices=nv, loops=loops)
 
 
-def _finite(values: np.ndarray) -> bool:
-    """Whether every value is finite and not Blender's ±FLT_MAX stand-in for an overflow."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        return bool((np.abs(values) < np.finfo(np.float32).max / 2).all())
-
-
 def _object_materials(ob, me) -> list:
     """Material per slot as the evaluated object sees it (object-linked slots included)."""
     if len(ob.material_slots):
@@ -351,9 +368,12 @@ def _transform(geom: _Geometry, matrix: np.ndarray, name: str):
     (int32[T,3]) and their face corners (int32[T,3], in the same corner order) of ``geom`` under
     ``matrix``."""
     linear, offset = matrix[:3, :3], matrix[:3, 3]
+    invalid = f"object {name} has NaN or infinite vertex positions in world space"
+    if not _within_range(matrix):  # first: inf × 0 would make NaN, with a numpy warning
+        raise ExtractionError(invalid)
     positions = geom.positions.astype(np.float64) @ linear.T + offset
-    if not _finite(positions):
-        raise ExtractionError(f"object {name} has NaN or infinite vertex positions in world space")
+    if not _within_range(positions):
+        raise ExtractionError(invalid)
     normal_matrix = np.linalg.pinv(linear).T  # pinv: a zero-scaled axis must not raise
     normals = geom.corner_normals.astype(np.float64) @ normal_matrix.T
     length = np.linalg.norm(normals, axis=1, keepdims=True)

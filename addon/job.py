@@ -3,7 +3,9 @@
 Blender data is only touched on the main thread: extraction in ``start()``, writing in ``finish()``
 in one final step, so a failed or cancelled bake leaves the file as it was. ``core.bake`` runs in
 between, in a worker thread when started with ``start()`` (Warp releases the GIL, Blender stays
-responsive) or in the caller's thread with ``run_sync()``.
+responsive) or in the caller's thread with ``run_sync()``. What can stop the writing (names taken
+by other data, unwritable folders) is checked before baking, and again in ``finish()`` before the
+first file or Blender datum is written, since the file may have changed during a modal bake.
 """
 from __future__ import annotations
 
@@ -15,8 +17,10 @@ from .. import core
 from ..core import BakeCancelled, BakeError, Settings
 from . import extract, lightmap, props, write
 
-# Errors caused by the scene or the settings: shown to the user as their message alone.
-USER_ERRORS = (extract.ExtractionError, BakeError, ValueError)
+# Errors caused by the scene, the settings (core.errors.SettingsError is a BakeError) or where the
+# results go (outputs.OutputError): shown to the user as their message alone. Anything else is a
+# bug, shown with its traceback.
+USER_ERRORS = (extract.ExtractionError, BakeError)
 
 
 class BakeJob:
@@ -89,15 +93,19 @@ class BakeJob:
         if self.error is not None:
             raise self.error
         t0 = time.perf_counter()
-        if self.lightmap_request is not None:  # files first: a disk error leaves Blender untouched
-            self.lightmap_files = lightmap.write_files(self.result.lightmap, self.settings)
+        # Every check first (objects resolved by name, names free): a failure writes nothing.
+        colors = maps = None
         if self.settings.target in ("vertex_colors", "both"):
-            self.warnings += write.write_color_attributes(self.extraction, self.result.output,
-                                                          self.settings.attribute, self.settings,
-                                                          context)
+            colors = write.prepare_color_attributes(self.extraction, self.result.output,
+                                                    self.settings.attribute, self.settings, context)
         if self.lightmap_request is not None:
-            self.warnings += lightmap.write_blender(self.result.lightmap, self.lightmap_files,
-                                                    self.settings)
+            maps = lightmap.prepare(self.result.lightmap, self.lightmap_request, self.settings)
+            # files next, all or none: a disk error leaves Blender untouched
+            self.lightmap_files = lightmap.write_files(self.result.lightmap, self.settings)
+        if colors is not None:
+            self.warnings += colors.apply(context)
+        if maps is not None:
+            self.warnings += maps.apply(self.result.lightmap, self.lightmap_files, self.settings)
         self.timings["write"] = time.perf_counter() - t0
         self.seconds = time.perf_counter() - self._t0
         if hasattr(context.scene, "radiosity_baker"):  # the CLI may run without the add-on registered
@@ -116,6 +124,15 @@ class BakeJob:
             receivers = [context.scene.objects[n] for n in self.receivers]
         self.extraction = extract.extract_scene(context.evaluated_depsgraph_get(), receivers)
         self.warnings += self.extraction.warnings
+        if not self.extraction.targets:  # a bake that writes nothing is no success
+            if self.receivers is None:
+                where = "in the scene"
+            else:
+                where = f"among {', '.join(self.receivers)}" if self.receivers else "named"
+            raise extract.ExtractionError(f"nothing to write: no visible mesh with faces {where}")
+        if self.settings.target in ("vertex_colors", "both"):
+            write.check_color_attributes(self.extraction, self.settings.attribute, self.settings,
+                                         context)
         if self.settings.target in ("lightmap", "both"):
             lightmap.output_folder(self.settings)  # an unwritable folder fails before baking
             self.lightmap_request, warnings = lightmap.request(self.extraction, self.settings)

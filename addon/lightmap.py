@@ -13,8 +13,8 @@ and a warning says so.
 """
 from __future__ import annotations
 
-import os
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
@@ -22,6 +22,8 @@ import numpy as np
 
 from ..core.lightmap import LightmapRequest, LightmapTarget, files
 from .extract import ExtractionError
+from .outputs import OutputError, Staging, check_folder
+from .write import name_clash
 
 UV_NAME = "Lightmap"
 MAX_UV_LAYERS = 8
@@ -56,27 +58,45 @@ def _cache_dir():
 def output_folder(settings) -> Path:
     """The absolute lightmap folder of ``settings.output`` (``//`` = the .blend's folder).
 
-    Raises ExtractionError when it is relative to an unsaved file or cannot be created / written.
+    Raises OutputError when it is relative to an unsaved file or files cannot be created in it
+    (tried by creating one; folders made for the try are removed again).
     """
     text = settings.output.strip()
     if text.startswith("//") and not bpy.data.filepath:
-        raise ExtractionError(f"lightmap output {text!r} is relative to the .blend file, which is not "
-                              f"saved: save it or choose an absolute folder")
+        raise OutputError(f"lightmap output {text!r} is relative to the .blend file, which is not "
+                          f"saved: save it or choose an absolute folder")
     folder = Path(bpy.path.abspath(text)).resolve()
-    existing = folder
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
-        raise ExtractionError(f"cannot write lightmaps to {folder}: {existing} is not a writable folder")
+    check_folder(folder, f"lightmaps to {folder}")
     return folder
+
+
+def _check_uv_name(ob, me) -> None:
+    """Raise OutputError when something other than a UV map holds the name ``Lightmap`` on ``me``
+    (Blender would call our UV map ``Lightmap.001``, and every rebake add another)."""
+    clash = name_clash(ob, me, UV_NAME, "uv")
+    if clash is not None:
+        raise OutputError(f"{ob.name}: mesh {me.name} already has {clash} named '{UV_NAME}', the name "
+                          f"of the lightmap's UV map: rename it")
+
+
+def _check_uv_room(ob, me) -> None:
+    """Raise ExtractionError when ``me`` has no ``Lightmap`` UV map and no room for one."""
+    if me.uv_layers.get(UV_NAME) is None and len(me.uv_layers) >= MAX_UV_LAYERS:
+        raise ExtractionError(f"mesh {me.name} ({ob.name}) already has {MAX_UV_LAYERS} UV maps, "
+                              f"Blender's limit: remove one or add a '{UV_NAME}' UV map to reuse")
 
 
 def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
     """What to lightmap (main thread, before the bake), and warnings.
 
     Objects whose modifiers change the topology are skipped with the message color attributes get;
-    a mesh without a ``Lightmap`` UV map that already holds 8 is an error naming it.
+    a mesh without a ``Lightmap`` UV map that already holds 8 is an error naming it, and so is one
+    where another kind of layer is called ``Lightmap`` (OutputError), or a color attribute of that
+    name baked alongside.
     """
+    if settings.target == "both" and settings.attribute == UV_NAME:
+        raise OutputError(f"the color attribute cannot be called '{UV_NAME}' when lightmaps are baked "
+                          f"too: their UV map has that name")
     warnings, targets = [], []
     for t in extraction.targets:
         ob = bpy.data.objects.get(t.object_name)
@@ -89,10 +109,9 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
         if me.library is not None:
             warnings.append(f"{ob.name}: mesh {me.name} is linked from a library: not lightmapped")
             continue
+        _check_uv_name(ob, me)
+        _check_uv_room(ob, me)
         layer = me.uv_layers.get(UV_NAME)
-        if layer is None and len(me.uv_layers) >= MAX_UV_LAYERS:
-            raise ExtractionError(f"mesh {me.name} ({ob.name}) already has {MAX_UV_LAYERS} UV maps, "
-                                  f"Blender's limit: remove one or add a '{UV_NAME}' UV map to reuse")
         corner_uv = None
         if layer is not None and not settings.reunwrap:
             corner_uv = np.empty(len(me.loops) * 2, np.float32)
@@ -108,42 +127,95 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
 
 
 def write_files(result, settings) -> dict[str, Path]:
-    """Write each page as ``<folder>/<page>.exr`` plus a ``.png`` preview; {page name: exr path}."""
+    """Write each page as ``<folder>/<page>.exr`` plus a ``.png`` preview; {page name: exr path}.
+
+    All files are written under temporary names, read back, then moved into place together: on
+    any failure (OutputError) the folder is as it was.
+    """
     folder = output_folder(settings)
-    folder.mkdir(parents=True, exist_ok=True)
     paths = {}
-    for page in result.pages:
-        stem = bpy.path.clean_name(page.name)
-        paths[page.name] = folder / f"{stem}.exr"
-        files.write_exr(paths[page.name], page.rgb, settings.lightmap_format)
-        files.write_preview(folder / f"{stem}.png", page.rgb)
+    with Staging() as staging:
+        for page in result.pages:
+            stem = bpy.path.clean_name(page.name)
+            paths[page.name] = folder / f"{stem}.exr"
+            with staging.writing(paths[page.name]) as temp:
+                files.write_exr(temp, page.rgb, settings.lightmap_format)
+                files.verify(temp, page.size)
+            with staging.writing(folder / f"{stem}.png") as temp:
+                files.write_preview(temp, page.rgb)
+                files.verify(temp, page.size)
+        staging.commit()
     return paths
 
 
-def write_blender(result, paths: dict, settings) -> list[str]:
-    """UV maps, images and (``settings.hookup``) material nodes for a finished bake; warnings."""
-    warnings = []
-    for mesh_name, uv in result.uv.items():
-        _write_uv(bpy.data.meshes[mesh_name], uv)
-    images = {page.name: _load_image(page.name, paths[page.name], settings.pack_images)
-              for page in result.pages}
-    if settings.hookup != "none":
-        shown: dict[str, str] = {}  # material name -> page it shows
-        for page in result.pages:
-            for name in page.objects:
-                for slot in bpy.data.objects[name].material_slots:
-                    mat = slot.material
-                    if mat is None or mat.library is not None or mat.node_tree is None:
-                        warnings.append(f"{name}: a material slot has no editable material: "
-                                        f"lightmap not hooked up there")
-                        continue
-                    if shown.setdefault(mat.name, page.name) != page.name:
-                        warnings.append(f"material {mat.name} is used by objects on lightmaps "
-                                        f"{shown[mat.name]} and {page.name}: it shows "
-                                        f"{shown[mat.name]}; give the objects their own materials")
-                        continue
-                    warnings += _hook_up(mat, images[page.name], settings.hookup == "multiply")
-    return warnings
+@dataclass
+class LightmapWrites:
+    """The Blender side of a finished lightmap bake, checked: ``uv`` [(mesh, float32[C,2])] to write
+    as ``Lightmap`` UV maps, ``hookups`` [(material, page name)] and the warnings found so far."""
+
+    uv: list
+    hookups: list
+    warnings: list
+
+    def apply(self, result, paths: dict, settings) -> list[str]:
+        """UV maps, images (loaded from ``paths``, {page name: exr path}) and material nodes;
+        returns all warnings."""
+        for me, uv in self.uv:
+            _write_uv(me, uv)
+        images = {page.name: _load_image(page.name, paths[page.name], settings.pack_images)
+                  for page in result.pages}
+        warnings = list(self.warnings)
+        for mat, page in self.hookups:
+            warnings += _hook_up(mat, images[page], settings.hookup == "multiply")
+        return warnings
+
+
+def _object(name: str):
+    """The mesh object called ``name``; OutputError when it vanished (renamed, deleted, converted)."""
+    ob = bpy.data.objects.get(name)
+    if ob is None or ob.type != "MESH":
+        raise OutputError(f"object {name} no longer exists as a mesh: nothing written")
+    return ob
+
+
+def prepare(result, request: LightmapRequest, settings) -> LightmapWrites:
+    """Check, before any file or Blender data is written, that a finished bake can be written:
+    objects resolved by name (a mesh renamed meanwhile is found through its object), meshes with
+    the corner count they were baked with, room and the name for the UV map. Raises OutputError
+    (or ExtractionError for a mesh that now holds 8 UV maps)."""
+    owner = {}  # mesh name at extraction -> the object it was read through
+    for t in request.targets:
+        owner.setdefault(t.mesh_name, t.object_name)
+    uv = []
+    for mesh_name, corner_uv in result.uv.items():
+        ob = _object(owner[mesh_name])
+        me = ob.data
+        if len(me.loops) != corner_uv.shape[0]:
+            raise OutputError(f"{ob.name} changed during the bake ({len(me.loops)} face corners, "
+                              f"{corner_uv.shape[0]} baked): nothing written")
+        _check_uv_name(ob, me)
+        _check_uv_room(ob, me)
+        uv.append((me, corner_uv))
+    warnings, hookups = [], []
+    shown: dict[str, str] = {}  # material name -> page it shows
+    for page in result.pages:
+        for name in page.objects:
+            ob = _object(name)
+            if settings.hookup == "none":
+                continue
+            for slot in ob.material_slots:
+                mat = slot.material
+                if mat is None or mat.library is not None or mat.node_tree is None:
+                    warnings.append(f"{name}: a material slot has no editable material: "
+                                    f"lightmap not hooked up there")
+                    continue
+                if shown.setdefault(mat.name, page.name) != page.name:
+                    warnings.append(f"material {mat.name} is used by objects on lightmaps "
+                                    f"{shown[mat.name]} and {page.name}: it shows "
+                                    f"{shown[mat.name]}; give the objects their own materials")
+                    continue
+                hookups.append((mat, page.name))
+    return LightmapWrites(uv, hookups, warnings)
 
 
 def _write_uv(me, uv: np.ndarray) -> None:

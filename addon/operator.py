@@ -123,8 +123,9 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         if isinstance(exc, USER_ERRORS):
             self.report({'ERROR'}, f"Radiosity bake failed: {exc}")
         else:
-            traceback.print_exception(exc)
-            self.report({'ERROR'}, f"Radiosity bake failed unexpectedly: {exc!r} (see the console)")
+            traceback.print_exception(exc)  # a bug: its traceback goes to the console
+            self.report({'ERROR'}, f"Radiosity bake: internal error: {type(exc).__name__}: {exc} "
+                                   f"(traceback in the console)")
         return {'CANCELLED'}
 
     def _done(self, job: BakeJob, warnings: list[str]):

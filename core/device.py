@@ -15,7 +15,7 @@ from typing import Callable, Optional
 
 import warp as wp
 
-from .errors import BakeError
+from .errors import SettingsError
 
 _initialised = False
 # The package's modules that hold kernels (relative to this package), loaded by load_kernels.
@@ -46,12 +46,12 @@ class Device:
 
 
 def select(preference: str = "auto") -> Device:
-    """Pick the device: "cuda" (error if none is usable), "cpu", or "auto" (CUDA when usable)."""
+    """Pick the device: "cuda" (SettingsError if none is usable), "cpu", or "auto" (CUDA when usable)."""
     init_warp()
     cuda = wp.get_cuda_device_count() > 0
     if preference == "cuda" and not cuda:
-        raise BakeError("device 'cuda' requested but Warp found no usable CUDA GPU "
-                        "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
+        raise SettingsError("device 'cuda' requested but Warp found no usable CUDA GPU "
+                            "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
     if preference in ("cuda", "auto") and cuda:
         return Device("cuda:0", 1)
     return Device("cpu", max(1, os.cpu_count() or 1))

@@ -18,6 +18,11 @@ import xatlas
 # Each retry lowers the density a little more than the overshoot, so few retries are needed.
 SHRINK_MARGIN = 0.98
 MAX_TRIES = 16
+# xatlas drops faces under its fixed epsilons (an area of about 1e-7 and lengths of 1e-4 in its
+# units), so a mesh measured in millimetres gets no chart at all. Such meshes are scaled up by a
+# power of two (exact in floating point) until the median triangle has at least this area (m²);
+# the density is scaled down alike, so the layout in texels is the same.
+MIN_MEDIAN_AREA = 1e-4
 
 
 def _generate(meshes, density: float, padding: int):
@@ -33,10 +38,19 @@ def _generate(meshes, density: float, padding: int):
     return atlas
 
 
-def _area(pos: np.ndarray, idx: np.ndarray) -> float:
-    """Surface area (m²) of the triangles idx over pos."""
+def _areas(pos: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """float64[M]: the area of each triangle idx over pos."""
     p = pos.astype(np.float64)[idx.astype(np.int64)]
-    return 0.5 * float(np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+def _scale(areas: np.ndarray) -> float:
+    """The power of two positions are multiplied by so that the median triangle area (``areas``,
+    float64[M], m²) reaches MIN_MEDIAN_AREA; 1 for meshes that need none."""
+    median = float(np.median(areas)) if areas.size else 0.0
+    if median <= 0.0 or median >= MIN_MEDIAN_AREA:
+        return 1.0
+    return 2.0 ** np.ceil(0.5 * np.log2(MIN_MEDIAN_AREA / median))
 
 
 def main(path_in: str, path_out: str) -> int:
@@ -48,10 +62,14 @@ def main(path_in: str, path_out: str) -> int:
                   for m in range(int(data[f"a{a}_meshes"]))]
         max_size = int(data[f"a{a}_max_size"])
         padding = int(data[f"a{a}_padding"])
+        areas = np.concatenate([_areas(pos, idx) for pos, idx in meshes])
+        scale = _scale(areas)
+        meshes = [(pos * np.float32(scale), idx) for pos, idx in meshes]
         # No page can hold more texels than max_size²: start at most at the density that fills
-        # it exactly (a far too high density makes xatlas build enormous charts first).
-        area = sum(_area(pos, idx) for pos, idx in meshes)
-        density = min(float(data[f"a{a}_density"]), max_size / max(area, 1e-30) ** 0.5)
+        # it exactly (a far too high density makes xatlas build enormous charts first). From here
+        # on the density is per unit of the scaled positions.
+        area = float(areas.sum()) * scale * scale
+        density = min(float(data[f"a{a}_density"]) / scale, max_size / max(area, 1e-30) ** 0.5)
         for _ in range(MAX_TRIES):
             atlas = _generate(meshes, density, padding)
             side = max(atlas.width, atlas.height)
@@ -62,7 +80,7 @@ def main(path_in: str, path_out: str) -> int:
             print(f"xatlas: no single page of {max_size} texels found", file=sys.stderr)
             return 3
         out[f"a{a}_size"] = np.array([atlas.width, atlas.height], np.int64)
-        out[f"a{a}_density"] = np.array(density)
+        out[f"a{a}_density"] = np.array(density * scale)
         for m in range(len(meshes)):
             vmap, idx, uv = atlas[m]
             out[f"a{a}_m{m}_vmap"] = vmap

@@ -6,6 +6,7 @@ row first, so rows are flipped on the way out and back in.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -54,10 +55,35 @@ def _write(oiio, path: Path, spec, pixels: np.ndarray) -> None:
     if out is None:
         raise BakeError(f"cannot write {path}: {oiio.geterror() or 'unknown image format'}")
     try:
-        if not out.open(str(path), spec) or not out.write_image(pixels):
-            raise BakeError(f"cannot write {path}: {out.geterror()}")
+        written = out.open(str(path), spec) and out.write_image(pixels)
     finally:
-        out.close()
+        closed = out.close()  # the last data reaches the file here: a full disk may fail only now
+    if not (written and closed):
+        raise BakeError(f"cannot write {path}: {out.geterror() or 'write failed'}")
+
+
+# The last chunk of every PNG file (length 0, type IEND, its CRC).
+_PNG_END = b"\0\0\0\0IEND\xaeB`\x82"
+
+
+def verify(path: Path, size: Optional[tuple] = None) -> None:
+    """Raise BakeError unless the image file ``path`` reads back whole (at ``size``, width and
+    height in texels, when given): a file cut short (a full disk) fails here. (A PNG decodes even
+    without its closing chunk, so that is checked too.)"""
+    oiio = _oiio()
+    buf = oiio.ImageBuf(str(path))
+    read = buf.read(force=True)
+    spec = buf.spec()
+    detail = buf.geterror() if not read or buf.has_error else None
+    if detail is None and size is not None and (spec.width, spec.height) != tuple(size):
+        detail = f"{spec.width}×{spec.height} texels, not {size[0]}×{size[1]}"
+    if detail is None and Path(path).suffix.lower() == ".png":
+        with open(path, "rb") as f:
+            f.seek(max(0, Path(path).stat().st_size - len(_PNG_END)))
+            detail = None if f.read() == _PNG_END else "the file ends early"
+    if detail is not None:
+        raise BakeError(f"cannot write {path}: it does not read back whole "
+                        f"({(detail.strip().splitlines() or ['unknown error'])[0]})")
 
 
 def read_exr(path: Path) -> np.ndarray:

@@ -22,7 +22,7 @@ from ..errors import BakeError
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
-_CACHE_VERSION = b"rb-unwrap-2"
+_CACHE_VERSION = b"rb-unwrap-3"
 
 
 @dataclass
@@ -101,7 +101,9 @@ def unwrap(groups: list[list[ChartMesh]], density: float, max_size: int, padding
     python: interpreter for the worker (default ``sys.executable``; inside Blender the add-on
     passes Blender's Python). Results are cached in ``cache_dir`` (default
     :func:`default_cache_dir`) keyed by positions, triangles and options, so an unchanged scene
-    skips xatlas. Raises BakeError when a group has no triangle with area or xatlas fails.
+    skips xatlas. Meshes measured in millimetres are laid out as well as metre-sized ones (the
+    worker rescales them for xatlas). Raises BakeError when a mesh has no triangle with area, when
+    xatlas gives a mesh no chart (one far smaller than the others of its group) or fails.
     """
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     cleaned = [[_clean(m) for m in group] for group in groups]
@@ -124,7 +126,20 @@ def unwrap(groups: list[list[ChartMesh]], density: float, max_size: int, padding
     if todo:
         _run_worker([cleaned[g] for g, _ in todo], density, max_size, padding, python, cache_dir,
                     [p for _, p in todo], atlases, [g for g, _ in todo])
+    for group, atlas in zip(groups, atlases):
+        for mesh, tri_uv in zip(group, atlas.tri_uv):
+            if not _uv_areas(tri_uv).any():  # xatlas leaves the faces it drops at UV (0, 0)
+                raise BakeError(f"UV unwrapping gave {mesh.name} no chart: it is too small next to "
+                                f"the other objects of its lightmap; give it its own (per-object "
+                                f"layout)")
     return atlases
+
+
+def _uv_areas(tri_uv: np.ndarray) -> np.ndarray:
+    """bool[T]: which triangles of float32[T,3,2] UVs cover some area of the page."""
+    e1, e2 = tri_uv[:, 1] - tri_uv[:, 0], tri_uv[:, 2] - tri_uv[:, 0]
+    with np.errstate(invalid="ignore"):
+        return np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0
 
 
 def _run_worker(items, density, max_size, padding, python, cache_dir, paths, atlases, slots):

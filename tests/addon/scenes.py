@@ -1,4 +1,5 @@
 """Small scenes built in code for the add-on tests (bpy): a lit ground with a shadow."""
+import hashlib
 import math
 
 import bpy
@@ -81,3 +82,57 @@ def snapshot() -> dict:
         mesh.vertices.foreach_get("co", co)
         out[mesh.name] = (sorted(mesh.attributes.keys()), co.tobytes())
     return out
+
+
+# Attribute data type -> (foreach property, values per element, dtype) for reading any attribute.
+_ATTRIBUTE_READ = {"FLOAT_COLOR": ("color", 4, np.float32), "BYTE_COLOR": ("color", 4, np.float32),
+                   "FLOAT2": ("vector", 2, np.float32), "FLOAT_VECTOR": ("vector", 3, np.float32),
+                   "INT32_2D": ("value", 2, np.int32), "INT": ("value", 1, np.int32),
+                   "INT8": ("value", 1, np.int32), "FLOAT": ("value", 1, np.float32),
+                   "BOOLEAN": ("value", 1, bool), "QUATERNION": ("value", 4, np.float32)}
+
+
+def mesh_data(mesh, skip=()) -> dict:
+    """Every attribute of ``mesh`` but those named in ``skip`` — (domain, type, bytes of its data)
+    — plus the UV maps' names and active / render flags and the active / render colour attribute."""
+    out = {}
+    for attr in mesh.attributes:
+        if attr.name in skip:
+            continue
+        prop, width, dtype = _ATTRIBUTE_READ[attr.data_type]
+        data = np.empty(len(attr.data) * width, dtype)
+        attr.data.foreach_get(prop, data)
+        out[attr.name] = (attr.domain, attr.data_type, data.tobytes())
+    out["uv"] = [(uv.name, uv.active, uv.active_render) for uv in mesh.uv_layers if uv.name not in skip]
+    out["colors"] = (mesh.color_attributes.active_color_name, mesh.color_attributes.default_color_name)
+    out["materials"] = [m.name if m else None for m in mesh.materials]
+    return out
+
+
+def user_data(skip=()) -> dict:
+    """What a bake must leave byte-identical in the open file: every mesh's data (``mesh_data``,
+    layers named in ``skip`` left out), vertex groups, images (the baker's own lightmaps left out)
+    and materials (nodes, their inputs' values, links)."""
+    out = {"objects": sorted((ob.name, ob.type, ob.data.name if ob.data else None, tuple(ob.matrix_world.col[3]),
+                              tuple(g.name for g in ob.vertex_groups)) for ob in bpy.data.objects)}
+    for mesh in bpy.data.meshes:
+        out[f"mesh {mesh.name}"] = mesh_data(mesh, skip)
+    for image in bpy.data.images:
+        if image.get("radiosity_baker_lightmap") is None:
+            packed = image.packed_file.data if image.packed_file else b""
+            out[f"image {image.name}"] = (tuple(image.size), image.source, image.filepath,
+                                          hashlib.sha256(packed).hexdigest())
+    for mat in bpy.data.materials:
+        tree = mat.node_tree
+        nodes = [] if tree is None else sorted(
+            (n.name, n.bl_idname, tuple((s.identifier, _value(s)) for s in n.inputs)) for n in tree.nodes)
+        links = [] if tree is None else sorted(
+            (l.from_node.name, l.from_socket.identifier, l.to_node.name, l.to_socket.identifier)
+            for l in tree.links)
+        out[f"material {mat.name}"] = (tuple(mat.diffuse_color), nodes, links)
+    return out
+
+
+def _value(socket):
+    value = getattr(socket, "default_value", None)
+    return tuple(value) if hasattr(value, "__len__") and not isinstance(value, str) else value

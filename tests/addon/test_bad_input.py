@@ -6,6 +6,7 @@ import pytest
 
 from radiosity_baker.addon import cli
 from radiosity_baker.addon.job import BakeJob
+from radiosity_baker.addon.outputs import OutputError
 
 from scenes import GROUND, OCCLUDER, fast_settings, grid, lit_ground, snapshot
 
@@ -71,7 +72,7 @@ def test_object_deleted_during_a_threaded_bake_writes_nothing(empty_scene):
     before = snapshot()
     while not job.poll()[2]:
         threading.Event().wait(0.01)
-    with pytest.raises(ValueError, match=OCCLUDER):
+    with pytest.raises(OutputError, match=OCCLUDER):
         job.finish(bpy.context)
     assert snapshot() == before
 

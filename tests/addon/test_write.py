@@ -4,8 +4,11 @@ import numpy as np
 import pytest
 
 from radiosity_baker.addon.extract import extract_scene
-from radiosity_baker.addon.write import write_color_attributes
+from radiosity_baker.addon.outputs import OutputError
+from radiosity_baker.addon.write import RESERVED_NAMES, write_color_attributes
 from radiosity_baker.core.settings import Settings
+
+from scenes import mesh_data
 
 pytestmark = pytest.mark.usefixtures("empty_scene")
 
@@ -69,27 +72,6 @@ def test_vertex_value_is_the_mean_of_its_corners():
     np.testing.assert_allclose(read_attribute(cube.data, "Lighting")[:, :3], 1 / 3, rtol=1e-6)
 
 
-def fingerprint(mesh):
-    """Bytes of every attribute except the one written, plus UV / material / image state."""
-    out = {}
-    for attr in mesh.attributes:
-        if attr.name == "Lighting":
-            continue
-        prop, width, dtype = {"FLOAT_COLOR": ("color", 4, np.float32),
-                              "BYTE_COLOR": ("color", 4, np.float32),
-                              "FLOAT2": ("vector", 2, np.float32),
-                              "FLOAT_VECTOR": ("vector", 3, np.float32),
-                              "INT32_2D": ("value", 2, np.int32), "INT": ("value", 1, np.int32),
-                              "BOOLEAN": ("value", 1, bool)}[attr.data_type]
-        data = np.empty(len(attr.data) * width, dtype)
-        attr.data.foreach_get(prop, data)
-        out[attr.name] = (attr.domain, attr.data_type, data.tobytes())
-    out["uv"] = [(uv.name, uv.active, uv.active_render) for uv in mesh.uv_layers]
-    out["colors"] = (mesh.color_attributes.active_color_name, mesh.color_attributes.default_color_name)
-    out["materials"] = [m.name for m in mesh.materials]
-    return out
-
-
 def test_other_attributes_uv_maps_images_and_materials_stay_identical():
     cube = add_cube()
     me = cube.data
@@ -103,12 +85,12 @@ def test_other_attributes_uv_maps_images_and_materials_stay_identical():
     me.materials.append(mat)
     image = bpy.data.images.new("Img", 4, 4, float_buffer=True)
     image.pixels.foreach_set(np.linspace(0, 1, 64, dtype=np.float32))
-    before = fingerprint(me)
+    before = mesh_data(me, skip=("Lighting",))
     pixels_before = np.empty(64, np.float32)
     image.pixels.foreach_get(pixels_before)
     ex = extract()
     write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
-    assert fingerprint(me) == before
+    assert mesh_data(me, skip=("Lighting",)) == before
     pixels_after = np.empty(64, np.float32)
     image.pixels.foreach_get(pixels_after)
     assert pixels_after.tobytes() == pixels_before.tobytes()
@@ -143,7 +125,7 @@ def test_topology_changing_modifier_is_skipped_with_a_warning():
     ex = extract()
     warnings = write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
     assert warnings == ["Cube: its modifiers change the vertex count (26 evaluated vs 8 original); "
-                        "apply the modifiers or enable 'Bake into copy' (--bake-copy)"]
+                        "apply the modifiers or enable 'Bake Copy' (--bake-copy)"]
     assert "Lighting" not in cube.data.attributes
     assert "Cube_baked" not in bpy.data.objects
 
@@ -190,7 +172,7 @@ def test_vanished_object_writes_nothing():
     first, second = add_cube(), add_cube(location=(3, 0, 0))
     ex = extract()
     bpy.data.objects.remove(second)
-    with pytest.raises(ValueError, match="Cube.001"):
+    with pytest.raises(OutputError, match="Cube.001"):
         write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
     assert "Lighting" not in first.data.attributes
 
@@ -198,6 +180,46 @@ def test_vanished_object_writes_nothing():
 def test_reserved_attribute_name_is_refused_before_writing():
     cube = add_cube()
     ex = extract()
-    with pytest.raises(ValueError, match="reserved"):
+    with pytest.raises(OutputError, match="reserved"):
         write_color_attributes(ex, colour_of(shading_world(ex)), "position", Settings())
     assert len(cube.data.vertices) == 8 and "position" in cube.data.attributes
+
+
+@pytest.mark.parametrize("kind", ["uv map", "float attribute", "face color", "vertex group"])
+def test_another_layer_of_that_name_stops_the_write_before_anything_changes(kind):
+    first, second = add_cube(), add_cube(location=(3, 0, 0))
+    me = second.data
+    if kind == "uv map":
+        me.uv_layers.new(name="Lighting")
+    elif kind == "float attribute":
+        me.attributes.new("Lighting", "FLOAT", "POINT").data.foreach_set("value", np.arange(8.0))
+    elif kind == "face color":  # FLOAT_COLOR, but not on a domain color attributes live on
+        me.attributes.new("Lighting", "FLOAT_COLOR", "FACE")
+    else:
+        second.vertex_groups.new(name="Lighting")
+    before = mesh_data(me)
+    ex = extract()
+    with pytest.raises(OutputError, match=f"{second.name}: mesh {me.name} already has .*'Lighting'"):
+        write_color_attributes(ex, colour_of(shading_world(ex)), "Lighting", Settings())
+    assert mesh_data(me) == before and [g.name for g in second.vertex_groups] == (
+        ["Lighting"] if kind == "vertex group" else [])
+    assert "Lighting" not in first.data.attributes
+
+
+@pytest.mark.parametrize("name", sorted(RESERVED_NAMES) + [".hidden", "é" * 32])
+def test_names_blender_reserves_or_refuses_are_errors_before_writing(name):
+    cube = add_cube()
+    cube.data.polygons[0].use_smooth = True  # a sharp_face layer with both values
+    before = mesh_data(cube.data)
+    ex = extract()
+    with pytest.raises(OutputError, match="reserved|bytes"):
+        write_color_attributes(ex, colour_of(shading_world(ex)), name, Settings())
+    assert mesh_data(cube.data) == before
+
+
+@pytest.mark.parametrize("name", sorted(RESERVED_NAMES))
+def test_reserved_names_are_the_ones_blender_refuses_for_a_color_attribute(name):
+    cube = add_cube()
+    cube.data.polygons[0].use_smooth = True
+    attr = cube.data.attributes.new(name, "FLOAT_COLOR", "POINT")
+    assert attr is None or attr.name != name

@@ -86,6 +86,26 @@ def test_a_mesh_without_area_is_an_error_naming_it(tmp_path):
         unwrap([[ChartMesh("Flat", p, np.array([[0, 1, 2]], np.int32))]], 16.0, 256, 2, cache_dir=tmp_path)
 
 
+@pytest.mark.parametrize("density", [20.0, 1000.0, 1e5])
+def test_millimetre_meshes_get_charts_and_texels_at_any_density(tmp_path, density):
+    pos, tris = _box(0.002)  # 2 mm: xatlas alone drops every face of it
+    atlas, = unwrap([[ChartMesh("screw", pos, tris), ChartMesh("nut", pos * 0.5 + 0.01, tris)]],
+                    density, 1024, 2, cache_dir=tmp_path)
+    w, h = atlas.size
+    assert w > 0 and h > 0 and atlas.density == density
+    dev = device.select("cpu")
+    for tri_uv in atlas.tri_uv:
+        assert np.isfinite(tri_uv).all() and tri_uv.min() >= 0.0 and tri_uv.max() <= 1.0
+        assert raster.rasterize(tri_uv, w, h, dev).count > 0
+
+
+def test_a_mesh_too_small_beside_the_others_of_its_page_is_an_error_naming_it(tmp_path):
+    pos, tris = _box()
+    with pytest.raises(BakeError, match="gave Speck no chart"):
+        unwrap([[ChartMesh("box", pos, tris), ChartMesh("box2", pos + 3, tris),
+                 ChartMesh("Speck", pos * 1e-4, tris)]], 16.0, 256, 2, cache_dir=tmp_path)
+
+
 def test_results_are_cached_per_mesh_content(tmp_path):
     pos, tris = _box()
     first, = unwrap([[ChartMesh("box", pos, tris)]], 16.0, 256, 2, cache_dir=tmp_path)
