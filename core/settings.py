@@ -104,8 +104,9 @@ class Settings:
                            choices=CONTENTS)
     target: str = _option("vertex_colors", "Target", "where the result is written", "output",
                           choices=TARGETS)
-    attribute: str = _option("Lighting", "Attribute", "name of the color attribute written, the "
-                             "only one ever overwritten", "output")
+    attribute: str = _option("Lighting", "Attribute", "the color attribute written, the only "
+                             "thing ever replaced; a UV map, another attribute or a vertex group "
+                             "of that name stops the bake", "output")
     device: str = _option("auto", "Device", "where the computation runs", "solver", choices=DEVICES)
     light_samples: int = _option(16, "Light Samples", "shadow samples per lamp / emissive triangle "
                                  "and receiver (softer, less noisy shadows)", "solver", low=1,
