@@ -16,49 +16,118 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
+from . import lighttree
 from .formfactor import outline_ff, tangent_frame, triangle_ff
 from .rays import lift, visible
 from .scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SceneData
 
 PI = math.pi
-ELLIPSE_SIDES = 32
+ELLIPSE_SIDES = wp.constant(32)
 # An ellipse lamp's outline is a regular polygon whose radii are scaled by this so that its area
 # equals the ellipse's.
-ELLIPSE_SCALE = 1.0 / math.sqrt(ELLIPSE_SIDES / (2.0 * PI) * math.sin(2.0 * PI / ELLIPSE_SIDES))
+ELLIPSE_SCALE = wp.constant(1.0 / math.sqrt(32 / (2.0 * PI) * math.sin(2.0 * PI / 32)))
+# The stack entry that stands for every leaf at once (``exact``).
+ALL_LEAVES = wp.constant(-2)
+BUCKET = wp.constant(lighttree.BUCKET)
+stack_int = wp.types.vector(length=lighttree.STACK, dtype=wp.int32)
+stack_f64 = wp.types.vector(length=lighttree.STACK, dtype=wp.float64)
+bucket_vec = wp.types.vector(length=lighttree.BUCKET, dtype=wp.float32)
+
+
+@wp.struct
+class Emitters:
+    """The lamps, the emissive triangles and the light tree over them, as kernels read them.
+
+    lamp_*: one entry per lamp (see ``core.scene.Lamps``; unit direction and axes, spot cones as
+    the cosine of the half angle and the smoothstep width of the blend); em_v0, em_v1, em_v2:
+    vec3[E] corners of the emissive triangles with area, em_radiance: vec3[E]; tree: the
+    ``lighttree.LightTree`` over all of them.
+    """
+
+    lamp_kind: wp.array(dtype=wp.int32)
+    lamp_pos: wp.array(dtype=wp.vec3)
+    lamp_dir: wp.array(dtype=wp.vec3)
+    lamp_u: wp.array(dtype=wp.vec3)
+    lamp_v: wp.array(dtype=wp.vec3)
+    lamp_size: wp.array(dtype=wp.vec2)
+    lamp_shape: wp.array(dtype=wp.int32)
+    lamp_power: wp.array(dtype=wp.vec3)
+    lamp_cos_half: wp.array(dtype=wp.float32)
+    lamp_smooth: wp.array(dtype=wp.float32)
+    em_v0: wp.array(dtype=wp.vec3)
+    em_v1: wp.array(dtype=wp.vec3)
+    em_v2: wp.array(dtype=wp.vec3)
+    em_radiance: wp.array(dtype=wp.vec3)
+    tree: lighttree.LightTree
 
 
 class Lights:
-    """The scene's lamps and emissive triangles on the device, as the direct-light kernel reads them.
-
-    em_v0, em_v1, em_v2: vec3[E] corners of the emissive triangles with area; em_radiance: vec3[E];
-    lamp_*: one entry per lamp (see ``core.scene.Lamps``; spot cones as the cosine of the half
-    angle and the smoothstep width of the blend).
-    """
+    """The scene's lamps and emissive triangles on the device (``emitters``, the struct kernels
+    read) with the light tree over them; num_lamps, num_emitters (emissive triangles with area)."""
 
     def __init__(self, scene: SceneData, dev: device_mod.Device):
         d = dev.name
         pos = np.asarray(scene.positions, np.float32)
         emissive = (scene.emission.max(axis=1) > 0.0) & (scene.triangle_areas() > 0.0)
-        etri = scene.triangles[emissive]
+        tri = pos[scene.triangles[emissive]].astype(np.float64)
+        radiance = np.ascontiguousarray(scene.emission[emissive], np.float32)
         self.num_emitters = int(emissive.sum())
-        self.em_v0, self.em_v1, self.em_v2 = (
-            wp.array(np.ascontiguousarray(pos[etri[:, k]]), dtype=wp.vec3, device=d) for k in range(3))
-        self.em_radiance = wp.array(np.ascontiguousarray(scene.emission[emissive], np.float32),
-                                    dtype=wp.vec3, device=d)
         lamps = scene.lamps
         self.num_lamps = len(lamps)
         cos_half = np.cos(0.5 * lamps.spot_size.astype(np.float64))
-        smooth = (1.0 - cos_half) * lamps.spot_blend
-        self.lamp_kind = wp.array(lamps.kind.astype(np.int32), dtype=wp.int32, device=d)
-        self.lamp_pos = wp.array(lamps.position.astype(np.float32), dtype=wp.vec3, device=d)
-        self.lamp_dir = wp.array(unit(lamps.direction), dtype=wp.vec3, device=d)
-        self.lamp_u = wp.array(unit(lamps.axis_u), dtype=wp.vec3, device=d)
-        self.lamp_v = wp.array(unit(lamps.axis_v), dtype=wp.vec3, device=d)
-        self.lamp_size = wp.array(lamps.size.astype(np.float32), dtype=wp.vec2, device=d)
-        self.lamp_shape = wp.array(lamps.shape.astype(np.int32), dtype=wp.int32, device=d)
-        self.lamp_power = wp.array(lamps.power.astype(np.float32), dtype=wp.vec3, device=d)
-        self.lamp_cos_half = wp.array(cos_half.astype(np.float32), dtype=wp.float32, device=d)
-        self.lamp_smooth = wp.array(smooth.astype(np.float32), dtype=wp.float32, device=d)
+        g = Emitters()
+        g.em_v0, g.em_v1, g.em_v2 = (wp.array(np.ascontiguousarray(tri[:, k], np.float32), dtype=wp.vec3,
+                                              device=d) for k in range(3))
+        g.em_radiance = wp.array(radiance, dtype=wp.vec3, device=d)
+        g.lamp_kind = wp.array(lamps.kind.astype(np.int32), dtype=wp.int32, device=d)
+        g.lamp_pos = wp.array(lamps.position.astype(np.float32), dtype=wp.vec3, device=d)
+        g.lamp_dir = wp.array(unit(lamps.direction), dtype=wp.vec3, device=d)
+        g.lamp_u = wp.array(unit(lamps.axis_u), dtype=wp.vec3, device=d)
+        g.lamp_v = wp.array(unit(lamps.axis_v), dtype=wp.vec3, device=d)
+        g.lamp_size = wp.array(lamps.size.astype(np.float32), dtype=wp.vec2, device=d)
+        g.lamp_shape = wp.array(lamps.shape.astype(np.int32), dtype=wp.int32, device=d)
+        g.lamp_power = wp.array(lamps.power.astype(np.float32), dtype=wp.vec3, device=d)
+        g.lamp_cos_half = wp.array(cos_half.astype(np.float32), dtype=wp.float32, device=d)
+        g.lamp_smooth = wp.array(((1.0 - cos_half) * lamps.spot_blend).astype(np.float32),
+                                 dtype=wp.float32, device=d)
+        leaves = _leaves(lamps, tri, radiance)
+        self.tree = lighttree.build(leaves) if len(leaves) else None
+        g.tree = (lighttree.upload(self.tree, leaves, d) if self.tree is not None
+                  else lighttree.upload_empty(d))
+        self.emitters = g
+
+
+def _leaves(lamps, tri: np.ndarray, radiance: np.ndarray) -> lighttree.Leaves:
+    """Light-tree leaves of the lamps and emissive triangles (float64[E,3,3] corners): boxes,
+    orientation cones and powers in lighting units at unit distance (irradiance/π: a point lamp of
+    power P gives P/4π² there, an area lamp P/π², a Lambertian triangle of radiance L and area A
+    seen straight on L·A/π)."""
+    kind = lamps.kind
+    nl = len(lamps)
+    size = lamps.size.astype(np.float64)
+    half = np.where(kind == LAMP_AREA, 0.5 * np.hypot(size[:, 0], size[:, 1]),
+                    np.where(kind == LAMP_SUN, 0.0, size[:, 0]))
+    lamp_power = lamps.power.astype(np.float64).sum(axis=1)
+    lamp_power = lamp_power * np.where(kind == LAMP_AREA, 1.0 / PI ** 2, 1.0 / (4.0 * PI ** 2))
+    centre = tri.mean(axis=1)
+    nt = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = 0.5 * np.linalg.norm(nt, axis=1)
+    pos = lamps.position.astype(np.float64)
+    # point lamps emit every way; spots are bounded by their cone widened by a right angle (a
+    # sphere lamp's points see past the cone's edge); area lamps and triangles are Lambertian
+    lamp_theta_o = np.where(kind == LAMP_AREA, 0.0, np.where(kind == LAMP_SPOT, np.minimum(
+        0.5 * lamps.spot_size.astype(np.float64), PI), PI))
+    return lighttree.Leaves(
+        kind=np.concatenate([np.full(nl, lighttree.LEAF_LAMP), np.full(len(tri), lighttree.LEAF_TRIANGLE)]).astype(np.int32),
+        index=np.concatenate([np.arange(nl), np.arange(len(tri))]).astype(np.int32),
+        lo=np.concatenate([pos - half[:, None], tri.min(axis=1)]).astype(np.float32),
+        hi=np.concatenate([pos + half[:, None], tri.max(axis=1)]).astype(np.float32),
+        axis=np.concatenate([unit(lamps.direction), unit(nt)]).astype(np.float32),
+        theta_o=np.concatenate([lamp_theta_o, np.zeros(len(tri))]).astype(np.float32),
+        theta_e=np.full(nl + len(tri), 0.5 * PI, np.float32),
+        two_sided=np.concatenate([np.zeros(nl, bool), np.ones(len(tri), bool)]),
+        power=np.concatenate([lamp_power, radiance.astype(np.float64).sum(axis=1) * area / PI]).astype(np.float32),
+        distant=np.concatenate([kind == LAMP_SUN, np.zeros(len(tri), bool)]))
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -69,26 +138,33 @@ def unit(v: np.ndarray) -> np.ndarray:
 
 
 @wp.func
-def _radical_inverse(k: int) -> float:
-    """Van der Corput radical inverse of k in base 2: the bits of k mirrored behind the point."""
-    r = float(0.0)
-    f = float(0.5)
+def _sobol_bits(k: int, second: int) -> wp.uint32:
+    """The 32 bits of coordinate 0 (the radical inverse in base 2) or 1 (``second``) of point k
+    of the Sobol (0,2)-sequence."""
+    v = wp.uint32(2147483648)
+    r = wp.uint32(0)
     x = k
     while x > 0:
         if x % 2 == 1:
-            r += f
+            r = r ^ v
         x = x / 2
-        f *= 0.5
+        if second != 0:
+            v = v ^ (v >> wp.uint32(1))
+        else:
+            v = v >> wp.uint32(1)
     return r
 
 
 @wp.func
-def sample2d(k: int, count: int, rotation: wp.vec2) -> wp.vec2:
-    """Point k of a ``count``-point Hammersley set over the unit square, shifted by ``rotation``
-    modulo 1 (Cranley–Patterson): stratified for any count, unbiased for a uniform rotation."""
-    u = (float(k) + 0.5) / float(count) + rotation[0]
-    v = _radical_inverse(k) + rotation[1]
-    return wp.vec2(u - wp.floor(u), v - wp.floor(v))
+def sample2d(k: int, scramble: wp.vec2) -> wp.vec2:
+    """Point k of the (0,2)-sequence over the unit square with its digits scrambled by
+    ``scramble`` (two numbers in [0,1), their bits XORed in): every prefix is stratified and
+    scrambling keeps it so (a probe's tile shares one sequence); unbiased for a uniform scramble."""
+    su = wp.uint32(scramble[0] * 4294967040.0)
+    sv = wp.uint32(scramble[1] * 4294967040.0)
+    u = float(_sobol_bits(k, 0) ^ su) * 2.3283064365386963e-10
+    v = float(_sobol_bits(k, 1) ^ sv) * 2.3283064365386963e-10
+    return wp.vec2(wp.min(u, 0.99999994), wp.min(v, 0.99999994))
 
 
 @wp.func
@@ -125,155 +201,429 @@ def _spot_factor(kind: int, w_from_lamp: wp.vec3, axis: wp.vec3, cos_half: float
     return wp.smoothstep(0.0, 1.0, t / smooth)
 
 
+@wp.func
+def _lamp_transfer(g: Emitters, l: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
+    """Unoccluded lighting of lamp l at p (normal n): inverse square for point and spot lamps (no
+    cone: it is applied per shadow sample), cosine for the sun, the exact form factor of an area
+    lamp's outline (one-sided)."""
+    kind = g.lamp_kind[l]
+    power = g.lamp_power[l]
+    if kind == LAMP_SUN:
+        cos_r = -wp.dot(n, g.lamp_dir[l])
+        if cos_r <= 0.0:
+            return wp.vec3(0.0)
+        return power * (cos_r / 3.141592653589793)
+    if kind == LAMP_AREA:
+        c = g.lamp_pos[l]
+        if wp.dot(p - c, g.lamp_dir[l]) <= 0.0:
+            return wp.vec3(0.0)  # one-sided: only the side the lamp points to is lit
+        hx = 0.5 * g.lamp_size[l][0]
+        hy = 0.5 * g.lamp_size[l][1]
+        ell = g.lamp_shape[l]
+        area = 4.0 * hx * hy
+        scale = float(1.0)
+        if ell != 0:
+            area = 3.141592653589793 * hx * hy
+            scale = ELLIPSE_SCALE  # an ellipse's outline polygon is scaled to the ellipse's area
+        ff = outline_ff(p, n, ell, ELLIPSE_SIDES, c, g.lamp_u[l], g.lamp_v[l], hx * scale, hy * scale)
+        if ff <= 0.0 or area <= 0.0:
+            return wp.vec3(0.0)
+        # radiance of a one-sided area lamp: P / (π A)
+        return power * (ff / (3.141592653589793 * area))
+    to = g.lamp_pos[l] - p
+    d2 = wp.dot(to, to)
+    if d2 <= 0.0:
+        return wp.vec3(0.0)
+    cos_r = wp.dot(n, to) / wp.sqrt(d2)
+    if cos_r <= 0.0:
+        return wp.vec3(0.0)
+    # intensity P/4π W/sr → irradiance I·cos/d² → lighting = irradiance/π
+    return power * (cos_r / (4.0 * 3.141592653589793 * 3.141592653589793 * d2))
+
+
+@wp.func
+def _lamp_shadow(g: Emitters, mesh: wp.uint64, l: int, p: wp.vec3, n: wp.vec3, origin: wp.vec3,
+                 k0: int, k1: int, rot: wp.vec2, far: float, trace: int):
+    """(shadow, rays): the visible fraction of lamp l from p over points k0 … k1−1 of its point
+    sequence (spot cones applied per sample, area lamps weighted by the transfer kernel); with
+    ``trace`` 0 every sample counts as visible (no rays)."""
+    kind = g.lamp_kind[l]
+    if trace == 0 and kind != LAMP_SPOT:
+        return 1.0, 0
+    if kind == LAMP_SUN:
+        w = -g.lamp_dir[l]
+        tan_half = wp.tan(0.5 * g.lamp_size[l][0])
+        if tan_half <= 0.0:
+            return visible(mesh, origin, origin + w * far), 1
+        t1, t2 = tangent_frame(w)
+        vis = float(0.0)
+        for k in range(k0, k1):
+            ws = wp.normalize(w + _disk(sample2d(k, rot), t1, t2, tan_half, tan_half))
+            vis += visible(mesh, origin, origin + ws * far)
+        return vis / float(k1 - k0), k1 - k0
+    if kind == LAMP_AREA:
+        c = g.lamp_pos[l]
+        hx = 0.5 * g.lamp_size[l][0]
+        hy = 0.5 * g.lamp_size[l][1]
+        acc = wp.vec2(0.0, 0.0)
+        for k in range(k0, k1):
+            st = sample2d(k, rot)
+            q = c + _disk(st, g.lamp_u[l], g.lamp_v[l], hx, hy)
+            if g.lamp_shape[l] == 0:
+                q = c + g.lamp_u[l] * (hx * (2.0 * st[0] - 1.0)) + g.lamp_v[l] * (hy * (2.0 * st[1] - 1.0))
+            acc += _weighted_visibility(mesh, origin, p, n, q, g.lamp_dir[l])
+        if acc[0] <= 0.0:
+            return 0.0, k1 - k0
+        return acc[1] / acc[0], k1 - k0
+    # point and spot: cone attenuation averaged over the lamp (Cycles applies the spot cone to
+    # each sampled point of a sphere lamp, which widens the blend band by ~asin(r/d))
+    lp = g.lamp_pos[l]
+    radius = g.lamp_size[l][0]
+    if radius <= 0.0:
+        att = _spot_factor(kind, wp.normalize(p - lp), g.lamp_dir[l], g.lamp_cos_half[l], g.lamp_smooth[l])
+        if att <= 0.0:
+            return 0.0, 0
+        if trace == 0:
+            return att, 0
+        return att * visible(mesh, origin, lp), 1
+    t1, t2 = tangent_frame(wp.normalize(lp - p))
+    lit = float(0.0)
+    rays = int(0)
+    for k in range(k0, k1):
+        q = lp + _disk(sample2d(k, rot), t1, t2, radius, radius)
+        att = _spot_factor(kind, wp.normalize(p - q), g.lamp_dir[l], g.lamp_cos_half[l], g.lamp_smooth[l])
+        if att > 0.0:
+            if trace == 0:
+                lit += att
+            else:
+                lit += att * visible(mesh, origin, q)
+                rays += 1
+    return lit / float(k1 - k0), rays
+
+
+@wp.func
+def _triangle_transfer(g: Emitters, e: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
+    """Unoccluded lighting of emissive triangle e at p (normal n): its radiance × the exact form
+    factor (both faces emit)."""
+    a = g.em_v0[e]
+    nt = wp.cross(g.em_v1[e] - a, g.em_v2[e] - a)
+    if wp.abs(wp.dot(p - a, nt)) <= 1.0e-6 * wp.length(nt) * wp.length(p - a):
+        return wp.vec3(0.0)  # receiver in the emitter's plane sees it edge-on
+    ff = triangle_ff(p, n, a, g.em_v1[e], g.em_v2[e])
+    if ff <= 0.0:
+        return wp.vec3(0.0)
+    return g.em_radiance[e] * ff
+
+
+@wp.func
+def _triangle_shadow(g: Emitters, mesh: wp.uint64, e: int, p: wp.vec3, n: wp.vec3, origin: wp.vec3,
+                     k0: int, k1: int, rot: wp.vec2, trace: int):
+    """(shadow, rays): the kernel-weighted visible fraction of emissive triangle e over points
+    k0 … k1−1 of its point sequence (uniform by area); 1 with ``trace`` 0."""
+    if trace == 0:
+        return 1.0, 0
+    a = g.em_v0[e]
+    b = g.em_v1[e]
+    c = g.em_v2[e]
+    nt = wp.cross(b - a, c - a)
+    acc = wp.vec2(0.0, 0.0)
+    for k in range(k0, k1):
+        st = sample2d(k, rot)
+        r = wp.sqrt(st[0])
+        q = a * (1.0 - r) + b * (r * (1.0 - st[1])) + c * (r * st[1])
+        acc += _weighted_visibility(mesh, origin, p, n, q, nt)
+    if acc[0] <= 0.0:
+        return 0.0, k1 - k0
+    return acc[1] / acc[0], k1 - k0
+
+
+@wp.func
+def _leaf_transfer(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
+    """Unoccluded lighting at p of light-tree leaf ``leaf`` (a lamp or an emissive triangle)."""
+    i = g.tree.leaf_index[leaf]
+    if g.tree.leaf_kind[leaf] == lighttree.LEAF_LAMP:
+        return _lamp_transfer(g, i, p, n)
+    return _triangle_transfer(g, i, p, n)
+
+
+@wp.func
+def _leaf_light(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3):
+    """(unoccluded lighting vec3, weight, spot) of ``leaf`` at p: the weight, how likely it is
+    chosen among its bucket, is the lighting's RGB sum (for a point-like spot times its cone, which
+    then decides alone whether it lights p); spot 1 for a spot lamp, whose cone the shadow applies."""
+    t = _leaf_transfer(g, leaf, p, n)
+    w = t[0] + t[1] + t[2]
+    i = g.tree.leaf_index[leaf]
+    spot = int(0)
+    if g.tree.leaf_kind[leaf] == lighttree.LEAF_LAMP:
+        if g.lamp_kind[i] == LAMP_SPOT:
+            spot = 1
+            if w > 0.0 and g.lamp_size[i][0] <= 0.0:
+                w *= _spot_factor(LAMP_SPOT, wp.normalize(p - g.lamp_pos[i]), g.lamp_dir[i],
+                                  g.lamp_cos_half[i], g.lamp_smooth[i])
+    return t, w, spot
+
+
+@wp.func
+def _importance(g: Emitters, node: int, p: wp.vec3, n: wp.vec3) -> float:
+    """Importance of a tree node at p: the bound for local nodes, the exact unoccluded lighting of
+    distant lamps (they have no position to bound)."""
+    t = g.tree
+    if t.distant[node] == 0:
+        return lighttree.bound_importance(t, node, p, n)
+    s = float(0.0)
+    for j in range(t.first[node], t.first[node] + t.count[node]):
+        tj, w, sj = _leaf_light(g, j, p, n)
+        s += w
+    return s
+
+
+@wp.func
+def _first_sample(x: wp.float64, count: int, r: wp.float64) -> int:
+    """Index of the first of ``count`` stratified samples (k + r)/count at or above x ∈ [0, 1]."""
+    return wp.clamp(int(wp.ceil(x * wp.float64(count) - r)), 0, count)
+
+
+@wp.func
+def _rotation(seed: int, leaf: int) -> wp.vec2:
+    """The Cranley–Patterson rotation of the point set on ``leaf`` for a receiver (or tile) seed."""
+    state = wp.rand_init(seed, leaf)
+    return wp.vec2(wp.randf(state), wp.randf(state))
+
+
+@wp.func
+def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.vec3, count: int,
+              kb: int, ke: int, seed: int, shadows: int, exact: int, far: float):
+    """Direct lighting at p (normal n, rays from ``origin``) from samples kb … ke−1 of ``count``
+    stratified light samples: (vec3 lighting, rays, lit, dark).
+
+    Sample k is u = (k + r)/count for one random r; the light tree maps u to an emitter, each node
+    splitting its interval of u among its children by importance (a bucket among its leaves by their
+    exact unoccluded lighting), so the samples an emitter gets are a run of consecutive k and its
+    probability is its interval's length. The tree is walked depth first, each node once, over the
+    intervals that hold samples. Each emitter's samples are points of one (0,2)-sequence on it; it
+    adds transfer × shadow × samples / (samples asked × probability): unbiased in the choice of
+    emitters, the shadow the kernel-weighted visible fraction as for a single lamp. ``shadows`` 0
+    leaves shadows out (every sample visible, no rays). ``exact`` 1 weighs every emitter by its
+    exact unoccluded lighting, as one bucket: each emitter's share of the samples is then its share
+    of the light. lit / dark: 1 if some emitter's shadow was above 0 / below 1.
+    """
+    t = g.tree
+    value = wp.vec3(0.0)
+    rays = int(0)
+    lit = int(0)
+    dark = int(0)
+    if t.root < 0:
+        return value, rays, lit, dark
+    r = wp.float64(wp.randf(wp.rand_init(seed, -1)))
+    nodes = stack_int()
+    los = stack_f64()
+    his = stack_f64()
+    nodes[0] = t.root
+    if exact != 0:
+        nodes[0] = ALL_LEAVES
+    los[0] = wp.float64(0.0)
+    his[0] = wp.float64(1.0)
+    sp = int(1)
+    asked = float(ke - kb)
+    weights = bucket_vec()
+    red = bucket_vec()
+    green = bucket_vec()
+    blue = bucket_vec()
+    while sp > 0:
+        sp -= 1
+        node = nodes[sp]
+        lo = los[sp]
+        hi = his[sp]
+        if wp.max(_first_sample(lo, count, r), kb) >= wp.min(_first_sample(hi, count, r), ke):
+            continue  # no sample falls into this node
+        left = int(-1)
+        first = int(0)
+        leaves = t.leaf_kind.shape[0]
+        if node != ALL_LEAVES:
+            left = t.left[node]
+            first = t.first[node]
+            leaves = t.count[node]
+        if left >= 0:
+            il = _importance(g, left, p, n)
+            ir = _importance(g, t.right[node], p, n)
+            if il + ir <= 0.0:
+                continue
+            s = lo + (hi - lo) * wp.float64(il / (il + ir))
+            if ir > 0.0:
+                nodes[sp] = t.right[node]
+                los[sp] = s
+                his[sp] = hi
+                sp += 1
+            if il > 0.0:
+                nodes[sp] = left
+                los[sp] = lo
+                his[sp] = s
+                sp += 1
+            continue
+        total = float(0.0)
+        light = wp.vec3(0.0)
+        spots = int(0)
+        for j in range(leaves):
+            tj, wj, sj = _leaf_light(g, first + j, p, n)
+            if j < BUCKET:
+                weights[j] = wj
+                red[j] = tj[0]
+                green[j] = tj[1]
+                blue[j] = tj[2]
+            if wj > 0.0:
+                total += wj
+                light += tj
+                spots += sj
+        if total <= 0.0:
+            continue
+        if shadows == 0 and spots == 0:
+            # unshadowed, the bucket's samples may as well count all its leaves at once
+            a = wp.max(_first_sample(lo, count, r), kb)
+            b = wp.min(_first_sample(hi, count, r), ke)
+            value += light * (float(b - a) / (asked * float(hi - lo)))
+            continue
+        cum = float(0.0)
+        l0 = lo
+        for j in range(leaves):
+            w = float(0.0)
+            tj = wp.vec3(0.0)
+            if j < BUCKET:
+                w = weights[j]
+                tj = wp.vec3(red[j], green[j], blue[j])
+            else:
+                tj, w, sj = _leaf_light(g, first + j, p, n)
+            if w <= 0.0:
+                continue
+            cum += w
+            l1 = hi
+            if cum < total:
+                l1 = lo + (hi - lo) * wp.float64(cum / total)
+            a = _first_sample(l0, count, r)
+            b = _first_sample(l1, count, r)
+            e0 = wp.max(a, kb)
+            e1 = wp.min(b, ke)
+            if e0 < e1:
+                leaf = first + j
+                i = t.leaf_index[leaf]
+                rot = _rotation(seed, leaf)
+                shadow = float(0.0)
+                nr = int(0)
+                if t.leaf_kind[leaf] == lighttree.LEAF_LAMP:
+                    shadow, nr = _lamp_shadow(g, mesh, i, p, n, origin, e0 - a, e1 - a, rot, far, shadows)
+                else:
+                    shadow, nr = _triangle_shadow(g, mesh, i, p, n, origin, e0 - a, e1 - a, rot, shadows)
+                rays += nr
+                if shadow > 0.0:
+                    lit = 1
+                if shadow < 1.0:
+                    dark = 1
+                if shadow > 0.0:
+                    value += tj * (shadow * float(e1 - e0) / (asked * float(l1 - l0)))
+            l0 = l1
+    return value, rays, lit, dark
+
+
+# Modes of the direct-light kernel per receiver.
+MODE_SKIP, MODE_FULL, MODE_UNSHADOWED, MODE_PROBE = -1, 0, 1, 2
+
+
 @wp.kernel
-def _direct_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
+def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(dtype=wp.vec3),
                    normals: wp.array(dtype=wp.vec3), sizes: wp.array(dtype=wp.float32),
-                   lamp_kind: wp.array(dtype=wp.int32),
-                   lamp_pos: wp.array(dtype=wp.vec3), lamp_dir: wp.array(dtype=wp.vec3),
-                   lamp_u: wp.array(dtype=wp.vec3), lamp_v: wp.array(dtype=wp.vec3),
-                   lamp_size: wp.array(dtype=wp.vec2), lamp_shape: wp.array(dtype=wp.int32),
-                   lamp_power: wp.array(dtype=wp.vec3), lamp_cos_half: wp.array(dtype=wp.float32),
-                   lamp_smooth: wp.array(dtype=wp.float32), em_v0: wp.array(dtype=wp.vec3),
-                   em_v1: wp.array(dtype=wp.vec3), em_v2: wp.array(dtype=wp.vec3),
-                   em_radiance: wp.array(dtype=wp.vec3), count: int, far: float,
-                   seed: int, ellipse_sides: int, ellipse_scale: float,
-                   out: wp.array(dtype=wp.vec3), rays: wp.array(dtype=wp.int32)):
+                   mode: wp.array(dtype=wp.int32), count: int, tile: wp.array(dtype=wp.int32),
+                   tile_index: wp.array(dtype=wp.int32), tile_count: wp.array(dtype=wp.int32),
+                   seed: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
+                   rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32)):
+    """Per receiver by ``mode``: FULL ``count`` shadowed samples; UNSHADOWED the same without
+    shadows; PROBE one sample, the receiver's own of its tile's stratified set (tile_index of
+    tile_count, seeded per tile); SKIP nothing (0). flags: 1 lit, 2 dark, 3 both (see _estimate)."""
     i = wp.tid() + offset
+    md = mode[i]
+    if md == MODE_SKIP:
+        out[i] = wp.vec3(0.0)
+        rays[i] = 0
+        flags[i] = 0
+        return
     p = points[i]
     n = normals[i]
     origin = lift(p, n, sizes[i])
-    state = wp.rand_init(seed, i)
-    total = wp.vec3(0.0)
-    nrays = int(0)
+    total = count
+    kb = int(0)
+    ke = count
+    s = wp.randi(wp.rand_init(seed, i))
+    if md == MODE_PROBE:
+        total = tile_count[i]
+        kb = tile_index[i]
+        ke = kb + 1
+        s = wp.randi(wp.rand_init(seed + 1, tile[i]))
+    shadows = int(1)
+    if md == MODE_UNSHADOWED:
+        shadows = 0
+    value, nr, lit, dark = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows, exact, far)
+    out[i] = value
+    rays[i] = nr
+    flags[i] = lit + 2 * dark
 
-    for l in range(lamp_kind.shape[0]):
-        kind = lamp_kind[l]
-        power = lamp_power[l]
-        rot = wp.vec2(wp.randf(state), wp.randf(state))
-        if kind == LAMP_POINT or kind == LAMP_SPOT:
-            to = lamp_pos[l] - p
-            d2 = wp.dot(to, to)
-            if d2 <= 0.0:
-                continue
-            w = to / wp.sqrt(d2)
-            cos_r = wp.dot(n, w)
-            if cos_r <= 0.0:
-                continue
-            radius = lamp_size[l][0]
-            # shadowed cone attenuation, averaged over the lamp: Cycles applies the spot cone to
-            # each sampled point of a sphere lamp, which widens the blend band by ~asin(r/d)
-            lit = float(0.0)
-            if radius <= 0.0:
-                att = _spot_factor(kind, -w, lamp_dir[l], lamp_cos_half[l], lamp_smooth[l])
-                if att > 0.0:
-                    lit = att * visible(mesh, origin, lamp_pos[l])
-                    nrays += 1
-            else:
-                t1, t2 = tangent_frame(w)
-                for k in range(count):
-                    q = lamp_pos[l] + _disk(sample2d(k, count, rot), t1, t2, radius, radius)
-                    att = _spot_factor(kind, wp.normalize(p - q), lamp_dir[l], lamp_cos_half[l],
-                                       lamp_smooth[l])
-                    if att > 0.0:
-                        lit += att * visible(mesh, origin, q)
-                        nrays += 1
-                lit = lit / float(count)
-            # intensity P/4π W/sr → irradiance I·cos/d² → lighting = irradiance/π
-            total += power * (lit * cos_r / (4.0 * 3.141592653589793 * 3.141592653589793 * d2))
-        elif kind == LAMP_SUN:
-            w = -lamp_dir[l]
-            cos_r = wp.dot(n, w)
-            if cos_r <= 0.0:
-                continue
-            tan_half = wp.tan(0.5 * lamp_size[l][0])
-            vis = float(0.0)
-            if tan_half <= 0.0:
-                vis = visible(mesh, origin, origin + w * far)
-                nrays += 1
-            else:
-                t1, t2 = tangent_frame(w)
-                for k in range(count):
-                    ws = wp.normalize(w + _disk(sample2d(k, count, rot), t1, t2, tan_half, tan_half))
-                    vis += visible(mesh, origin, origin + ws * far)
-                vis = vis / float(count)
-                nrays += count
-            total += power * (vis * cos_r / 3.141592653589793)
-        elif kind == LAMP_AREA:
-            c = lamp_pos[l]
-            axis = lamp_dir[l]
-            if wp.dot(p - c, axis) <= 0.0:
-                continue  # one-sided: only the side the lamp points to is lit
-            hx = 0.5 * lamp_size[l][0]
-            hy = 0.5 * lamp_size[l][1]
-            ell = lamp_shape[l]
-            area = 4.0 * hx * hy
-            if ell != 0:
-                area = 3.141592653589793 * hx * hy
-            # an ellipse's outline polygon is scaled to the ellipse's area
-            scale = wp.where(ell != 0, ellipse_scale, 1.0)
-            ff = outline_ff(p, n, ell, ellipse_sides, c, lamp_u[l], lamp_v[l], hx * scale, hy * scale)
-            if ff <= 0.0 or area <= 0.0:
-                continue
-            acc = wp.vec2(0.0, 0.0)
-            for k in range(count):
-                st = sample2d(k, count, rot)
-                q = c + _disk(st, lamp_u[l], lamp_v[l], hx, hy)
-                if ell == 0:
-                    q = c + lamp_u[l] * (hx * (2.0 * st[0] - 1.0)) + lamp_v[l] * (hy * (2.0 * st[1] - 1.0))
-                acc += _weighted_visibility(mesh, origin, p, n, q, axis)
-            nrays += count
-            if acc[0] > 0.0:
-                # radiance of a one-sided area lamp: P / (π A)
-                total += power * (ff * (acc[1] / acc[0]) / (3.141592653589793 * area))
 
-    for e in range(em_v0.shape[0]):
-        a = em_v0[e]
-        b = em_v1[e]
-        c2 = em_v2[e]
-        nt = wp.cross(b - a, c2 - a)
-        if wp.abs(wp.dot(p - a, nt)) <= 1.0e-6 * wp.length(nt) * wp.length(p - a):
-            continue  # receiver in the emitter's plane sees it edge-on
-        ff = triangle_ff(p, n, a, b, c2)
-        if ff <= 0.0:
-            continue
-        rot = wp.vec2(wp.randf(state), wp.randf(state))
-        acc = wp.vec2(0.0, 0.0)
-        for k in range(count):
-            st = sample2d(k, count, rot)
-            r = wp.sqrt(st[0])
-            q = a * (1.0 - r) + b * (r * (1.0 - st[1])) + c2 * (r * st[1])
-            acc += _weighted_visibility(mesh, origin, p, n, q, nt)
-        nrays += count
-        if acc[0] > 0.0:
-            total += em_radiance[e] * (ff * acc[1] / acc[0])
+def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray, mode: np.ndarray,
+             count: int, seed: int, tiles=None, progress: Optional[Callable[[float], None]] = None):
+    """One pass of the direct-light kernel over N receivers of ``problem``.
 
-    out[i] = total
-    rays[i] = nrays
+    points, normals: float32[N,3] (m, the problem's frame; unit); sizes: float32[N] local feature
+    size (m) for the ray offset; mode: int32[N] MODE_* per receiver; count: samples of the FULL and
+    UNSHADOWED modes; seed: of the sample jitter; tiles: for MODE_PROBE, (tile int[N], the
+    receiver's index in its tile int[N], receivers in its tile int[N]). Returns (float32[N,3]
+    lighting, int64[N] rays, int32[N] flags: 1 some emitter was seen, 2 some was shadowed, 3 both).
+    """
+    dev = problem.device
+    d = dev.name
+    n = int(mode.shape[0])
+    out = wp.zeros(n, dtype=wp.vec3, device=d)
+    rays = wp.zeros(n, dtype=wp.int32, device=d)
+    flags = wp.zeros(n, dtype=wp.int32, device=d)
+    if tiles is None:
+        tiles = (np.zeros(1, np.int32),) * 3
+    tile_arrays = [wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=d) for a in tiles]
+    device_mod.launch(
+        _direct_kernel, n,
+        [problem.mesh.id, problem.lights.emitters,
+         wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
+         wp.array(unit(normals), dtype=wp.vec3, device=d),
+         wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
+         wp.array(np.ascontiguousarray(mode, np.int32), dtype=wp.int32, device=d), int(count),
+         *tile_arrays, int(seed), int(exact_selection(problem, n)), problem.far, out, rays, flags],
+        dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
+    return out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy()
 
 
 def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,
                     progress: Optional[Callable[[float], None]] = None):
     """Direct lighting at receivers of ``problem`` (a ``core.problem.Problem``: its BVH, lights,
-    device and ``settings.light_samples``).
+    device and ``settings.light_samples``, the stratified light samples per receiver).
 
     points, normals: float32[N,3] positions (m, the problem's frame) and unit normals; sizes:
     float32[N] local feature size (m) for the ray offset. Returns (float32[N,3] lighting =
     irradiance/π, number of shadow rays traced).
     """
     n = int(points.shape[0])
-    dev = problem.device
-    d = dev.name
-    pts = wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d)
-    nrm = wp.array(unit(normals), dtype=wp.vec3, device=d)
-    size = wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d)
-    out = wp.zeros(n, dtype=wp.vec3, device=d)
-    rays = wp.zeros(n, dtype=wp.int32, device=d)
-    g = problem.lights
-    device_mod.launch(
-        _direct_kernel, n,
-        [problem.mesh.id, pts, nrm, size, g.lamp_kind, g.lamp_pos, g.lamp_dir, g.lamp_u, g.lamp_v,
-         g.lamp_size, g.lamp_shape, g.lamp_power, g.lamp_cos_half, g.lamp_smooth, g.em_v0, g.em_v1,
-         g.em_v2, g.em_radiance, int(problem.settings.light_samples), problem.far,
-         int(problem.settings.seed), ELLIPSE_SIDES, float(ELLIPSE_SCALE), out, rays],
-        dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
-    return out.numpy().astype(np.float32), int(rays.numpy().astype(np.int64).sum())
+    out, rays, _ = estimate(problem, points, normals, sizes, np.full(n, MODE_FULL, np.int32),
+                            problem.settings.light_samples, problem.settings.seed, progress=progress)
+    return out, int(rays.sum())
+
+
+# ``light_selection`` auto weighs every emitter exactly at every receiver where there are at most
+# EXACT_EMITTERS (about as much work per receiver as a few shadow rays) or where that is at most
+# EXACT_WORK weighings in all (a few seconds).
+EXACT_EMITTERS = 16
+EXACT_WORK = 1 << 24
+
+
+def exact_selection(problem, receivers: int) -> bool:
+    """Whether direct light at ``receivers`` receivers weighs every emitter exactly
+    (``light_selection``: exact; tree; auto: see EXACT_EMITTERS)."""
+    mode = problem.settings.light_selection
+    if mode != "auto":
+        return mode == "exact"
+    emitters = problem.lights.num_lamps + problem.lights.num_emitters
+    return emitters <= EXACT_EMITTERS or receivers * emitters <= EXACT_WORK

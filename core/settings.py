@@ -37,7 +37,9 @@ LAYOUTS = ("atlas", "per_object")
 HOOKUPS = ("none", "node", "multiply")
 LIGHTMAP_FORMATS = ("half", "float")
 TEXEL_INDIRECT = ("gather", "interpolate")
+TEXEL_SHADOWS = ("adaptive", "fixed")
 DEVICES = ("auto", "cpu", "cuda")
+LIGHT_SELECTIONS = ("auto", "exact", "tree")
 GROUPS = ("solver", "lightmap", "output")
 
 # One line per choice, for tooltips and help.
@@ -62,6 +64,12 @@ CHOICE_HELP = {
     "gather": "The per-vertex solution interpolated, plus the detail a final gather over the "
               "element tree finds at each texel",
     "interpolate": "The per-vertex solution interpolated over each triangle",
+    "adaptive": "One probe ray per texel; more only in 4×4-texel tiles where the probes disagree, "
+                "most where a texel's own rays do",
+    "fixed": "The light samples at every texel",
+    "exact": "Every emitter weighed by its exact unoccluded light at every receiver (cost grows "
+             "with the number of emitters)",
+    "tree": "A light tree picks emitters by importance (cost grows with the log of their number)",
 }
 CHOICE_HELP["ao"] = ("Ambient occlusion: the unoccluded fraction of the hemisphere within the AO "
                      "distance, in all three channels (what Cycles' AO bake gives)")
@@ -108,9 +116,13 @@ class Settings:
                              "thing ever replaced; a UV map, another attribute or a vertex group "
                              "of that name stops the bake", "output")
     device: str = _option("auto", "Device", "where the computation runs", "solver", choices=DEVICES)
-    light_samples: int = _option(16, "Light Samples", "shadow samples per lamp / emissive triangle "
-                                 "and receiver (softer, less noisy shadows)", "solver", low=1,
-                                 soft_high=256, flag="--samples")
+    light_samples: int = _option(16, "Light Samples", "shadow rays per receiver, shared by all lamps "
+                                 "and emissive triangles by their light (softer, less noisy "
+                                 "shadows)", "solver", low=1, soft_high=256, flag="--samples")
+    light_selection: str = _option("auto", "Light Selection", "how shadow rays are shared among "
+                                   "the emitters; auto: exact for up to 16 emitters or while "
+                                   "receivers × emitters stay under 16 million, else the tree", "solver",
+                                   choices=LIGHT_SELECTIONS)
     visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair for the "
                                    "visibility of indirect light", "solver", low=1, high=255,
                                    soft_high=64, flag="--rays")
@@ -148,6 +160,12 @@ class Settings:
                                "lightmap", low=1, high=8)
     texel_indirect: str = _option("gather", "Texel Indirect", "indirect light per texel",
                                   "lightmap", choices=TEXEL_INDIRECT)
+    texel_shadows: str = _option("adaptive", "Texel Shadows", "shadow rays per lightmap texel",
+                                 "lightmap", choices=TEXEL_SHADOWS)
+    shadow_budget: int = _option(64, "Shadow Budget", "most shadow rays a texel traces in a "
+                                 "penumbra (adaptive texel shadows: elsewhere one per texel, or "
+                                 "the light samples where a shadow edge passes)", "lightmap", low=1,
+                                 soft_high=1024)
     lightmap_format: str = _option("half", "EXR Format", "precision of the EXR channels",
                                    "lightmap", choices=LIGHTMAP_FORMATS)
     pack_images: bool = _option(False, "Pack Images", "pack the lightmap images into the .blend "
@@ -212,13 +230,13 @@ def flag(name: str) -> str:
 _OPTIONS = {f.name: f.metadata["option"] for f in fields(Settings)}
 # Settings only some solvers read (SolverInfo.reads names them); the others are read by all.
 SOLVER_SPECIFIC = {name for info in SOLVERS.values() for name in info.reads}
-# light_samples is read by every solver that transports light, not by AO.
-SOLVER_SPECIFIC.add("light_samples")
+# light_samples and light_selection are read by every solver that transports light, not by AO.
+SOLVER_SPECIFIC.update(("light_samples", "light_selection"))
 
 
 def reads(solver: str, name: str) -> bool:
     """Whether ``solver`` reads setting ``name`` (the panel greys out the others)."""
-    if name == "light_samples":
+    if name in ("light_samples", "light_selection"):
         return SOLVERS[solver].light
     return name not in SOLVER_SPECIFIC or name in SOLVERS[solver].reads
 
@@ -239,7 +257,8 @@ def describe(name: str) -> str:
     opt = option(name)
     text = opt.help
     if opt.choices is not None and name not in ("device", "layout", "lightmap_format"):
-        text += ": " + "; ".join(f"{c}: {CHOICE_HELP[c]}" for c in opt.choices if c in CHOICE_HELP)
+        text += ": " + "; ".join(f"{c}: {CHOICE_HELP[c]}" for c in opt.choices
+                                if c in CHOICE_HELP and c != "auto")  # auto is the device's
     if name == "method":
         text += "; " + ", ".join(f"{a} is another name for {m}" for a, m in METHOD_ALIASES.items())
     if opt.low is not None and opt.high is not None:

@@ -12,7 +12,7 @@ from typing import Optional
 import numpy as np
 
 from ..errors import BakeError
-from . import raster, unwrap
+from . import raster, shadows, unwrap
 
 ATLAS_NAME = "Lightmap"
 
@@ -243,9 +243,14 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
     texel_receivers = receivers_mod.on_triangles(problem, cat(1), np.concatenate([r[0].bary for r in rastered]),
                                                  cat(2), cat(3), cat(4).astype(np.float32))
     if SOLVERS[settings.solver].light:
-        lit_direct, rays = stages.run("texel direct", direct.direct_lighting, problem,
-                                      texel_receivers.points, texel_receivers.normals,
-                                      texel_receivers.sizes, stages.reporter("texel direct"))
+        args = [problem, texel_receivers.points, texel_receivers.normals, texel_receivers.sizes]
+        if settings.texel_shadows == "adaptive":
+            lit_direct, rays = stages.run("texel direct", shadows.texel_direct, problem,
+                                          [r[0] for r in rastered], *args[1:],
+                                          stages.reporter("texel direct"))
+        else:
+            lit_direct, rays = stages.run("texel direct", direct.direct_lighting, *args,
+                                          stages.reporter("texel direct"))
         problem.counts["rays"] += rays
     else:  # AO needs no light
         lit_direct = np.zeros((len(texel_receivers), 3), np.float32)

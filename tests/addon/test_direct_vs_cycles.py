@@ -75,12 +75,12 @@ CASES = {
 }
 
 
-def _our_direct(receiver_name: str) -> np.ndarray:
+def _our_direct(receiver_name: str, **settings) -> np.ndarray:
     """float32[V,3]: our direct lighting per original vertex of the receiver, via the color attribute."""
     receiver = bpy.data.objects[receiver_name]
     extraction = extract_scene(bpy.context.evaluated_depsgraph_get(), receivers=[receiver])
-    settings = Settings(method="direct", content="lighting", attribute="Ours",
-                        light_samples=LIGHT_SAMPLES, device="cpu")
+    settings = Settings(**{**dict(method="direct", content="lighting", attribute="Ours",
+                                  light_samples=LIGHT_SAMPLES, device="cpu"), **settings})
     result = bake(extraction.scene, settings)
     write_color_attributes(extraction, result.output, settings.attribute, settings)
     rgba = np.empty(len(receiver.data.vertices) * 4, np.float32)
@@ -135,3 +135,38 @@ def test_direct_light_matches_cycles(empty_scene, case):
                    "vertices": int(reference.shape[0])})
     assert reference.mean() > 0.01, "the lamp does not reach the receiver"
     assert rmse <= TOLERANCE, f"{case}: relative RMSE {rmse:.4f} > {TOLERANCE}"
+
+
+# The emissive mesh: a wavy 32 × 32-quad panel (2048 triangles), sampled through the light tree.
+MESH_QUADS = 32
+MESH_LIGHT_SAMPLES = 256
+
+
+@pytest.mark.slow
+def test_direct_light_of_a_2048_triangle_emissive_mesh_matches_cycles(empty_scene):
+    receiver = _mesh("Receiver", cuts=PLANE_CUTS, size=2.0)
+    _mesh("Occluder", (0.1, 0.05, 0.7), size=0.4, kind="cube")
+    panel = _mesh("Sign", (0.1, 0.1, 1.6), (math.pi, 0.0, 0.0), cuts=MESH_QUADS, size=0.8,
+                  material=_emissive_material(10.0))
+    co = np.empty(len(panel.data.vertices) * 3, np.float32)
+    panel.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    co[:, 2] += 0.04 * np.sin(co[:, 0] * 25.0)  # a wave: the triangles face many ways
+    panel.data.vertices.foreach_set("co", co.ravel())
+    panel.data.update()
+
+    reference = cycles_bake_vertex_colors(["Receiver"], passes=("DIRECT",),
+                                          samples=CYCLES_SAMPLES)["Receiver"]
+    extraction = extract_scene(bpy.context.evaluated_depsgraph_get(), receivers=[receiver])
+    emitters = int((extraction.scene.emission.max(axis=1) > 0).sum())
+    ours = _our_direct("Receiver", light_selection="tree", light_samples=MESH_LIGHT_SAMPLES)
+    rmse = metrics.relative_rmse(ours, reference)
+    ratio = float(ours.sum() / reference.sum())
+    print(f"\nemissive mesh ({emitters} triangles, light tree): relative RMSE {rmse:.4f}, "
+          f"mean ours/Cycles {ratio:.4f}")
+    _record("emissive_mesh_2048", {"relative_rmse": round(rmse, 5), "mean_ratio": round(ratio, 5),
+                                   "emissive_triangles": emitters, "cycles_samples": CYCLES_SAMPLES,
+                                   "light_samples": MESH_LIGHT_SAMPLES, "light_selection": "tree"})
+    assert emitters >= 2000
+    assert reference.mean() > 0.01
+    assert rmse <= TOLERANCE, f"emissive mesh: relative RMSE {rmse:.4f} > {TOLERANCE}"

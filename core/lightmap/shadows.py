@@ -1,0 +1,108 @@
+"""Adaptive shadow rays for lightmap texels: few where the texels around agree, more in penumbrae.
+
+The schedule works on each page's (supersampled) texel grid:
+
+1. Probe: every texel traces one ray, its own sample of one stratified set of light samples over
+   its TILE × TILE tile (so a tile's probes spread over the emitters and over each emitter).
+2. A tile whose probes all saw light, as did every probe of the tiles around it (8-neighbourhood),
+   is lit: its texels get the unoccluded light of ``light_samples`` emitter samples, without rays.
+   All shadowed, with the tiles around: dark (0). Every other texel (near a shadow edge, in a
+   penumbra, where a probe found no light) traces ``light_samples`` rays.
+3. Texels whose own rays disagreed (some emitter seen, some shadowed) and the texels next to them
+   trace up to ``shadow_budget`` rays in all, both estimates averaged by their sample counts.
+
+What it can miss: a shadow too faint for a whole neighbourhood of probes (3 × 3 tiles, 144 rays)
+to see, covering a fraction f of the light everywhere there, with probability about (1 − f)^144.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import numpy as np
+
+from .. import direct
+
+# Side of a tile in texels of the supersampled grid.
+TILE = 4
+# Tile classes.
+_EMPTY, _LIT, _DARK, _MIXED = 0, 1, 2, 3
+
+
+def _around(grid: np.ndarray):
+    """The 9 shifted views (3 × 3 neighbourhood, edges padded with 0) of a 2-D array."""
+    pad = np.pad(grid, 1)
+    h, w = grid.shape
+    return [pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+
+
+def _tile_classes(flags: np.ndarray, tile: np.ndarray, shape: tuple) -> np.ndarray:
+    """int8[TY,TX] class of each tile from its texels' probe flags (int[N], their tiles int[N])."""
+    seen = np.zeros((shape[0] * shape[1], 4), bool)
+    seen[tile, flags] = True
+    cls = np.full(seen.shape[0], _MIXED, np.int8)
+    cls[~seen.any(axis=1)] = _EMPTY
+    cls[seen[:, 1] & ~seen[:, [0, 2, 3]].any(axis=1)] = _LIT
+    cls[seen[:, 2] & ~seen[:, [0, 1, 3]].any(axis=1)] = _DARK
+    return cls.reshape(shape)
+
+
+def _settled(cls: np.ndarray) -> np.ndarray:
+    """int8[TY,TX]: a tile's class where it and every non-empty tile around it are lit, or all
+    dark; _MIXED elsewhere."""
+    out = cls.copy()
+    for near in _around(cls):
+        out[(near != _EMPTY) & (near != cls)] = _MIXED
+    return out
+
+
+def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,
+                 progress: Optional[Callable[[float], None]] = None):
+    """Direct lighting at the texels of ``pages`` (``raster.Texels`` each, their texels in this
+    order in points, normals float32[N,3] and sizes float32[N], as ``direct.estimate`` takes
+    them) with adaptive shadow rays (see the module). Returns (float32[N,3] lighting, rays)."""
+    settings = problem.settings
+    report = progress or (lambda fraction: None)
+    n = int(points.shape[0])
+    grids, tile, start = [], [], 0
+    base = 0
+    for texels in pages:
+        y, x = np.divmod(texels.index, texels.width)
+        shape = (-(-texels.height // TILE), -(-texels.width // TILE))
+        tile.append(base + (y // TILE) * shape[1] + x // TILE)
+        grids.append((texels, shape, base, slice(start, start + texels.count)))
+        base += shape[0] * shape[1]
+        start += texels.count
+    tile = np.concatenate(tile) if tile else np.zeros(0, np.int64)
+    order = np.argsort(tile, kind="stable")
+    per_tile = np.bincount(tile, minlength=base)
+    index = np.empty(n, np.int64)
+    index[order] = np.arange(n) - np.repeat(np.cumsum(per_tile) - per_tile, per_tile)
+    _, probe_rays, flags = direct.estimate(problem, points, normals, sizes,
+                                           np.full(n, direct.MODE_PROBE, np.int32), 1, settings.seed,
+                                           (tile, index, per_tile[tile]),
+                                           progress=lambda f: report(0.2 * f))
+    mode = np.full(n, direct.MODE_FULL, np.int32)
+    for texels, shape, first, rows in grids:
+        cls = _settled(_tile_classes(flags[rows], tile[rows] - first, shape)).ravel()[tile[rows] - first]
+        mode[rows] = np.where(cls == _LIT, direct.MODE_UNSHADOWED,
+                              np.where(cls == _DARK, direct.MODE_SKIP, direct.MODE_FULL))
+    samples = settings.light_samples
+    out, rays, flags = direct.estimate(problem, points, normals, sizes, mode, samples, settings.seed,
+                                       progress=lambda f: report(0.2 + 0.5 * f))
+    more = settings.shadow_budget - samples
+    penumbra = np.zeros(n, bool)
+    for texels, _, _, rows in grids:
+        grid = np.zeros(texels.width * texels.height, bool)
+        grid[texels.index] = flags[rows] == 3
+        grown = np.zeros_like(grid.reshape(texels.height, texels.width))
+        for near in _around(grid.reshape(texels.height, texels.width)):
+            grown |= near
+        penumbra[rows] = grown.ravel()[texels.index] & (mode[rows] == direct.MODE_FULL)
+    if more > 0 and penumbra.any():
+        extra, extra_rays, _ = direct.estimate(problem, points, normals, sizes,
+                                               np.where(penumbra, direct.MODE_FULL, direct.MODE_SKIP),
+                                               more, settings.seed + 1,
+                                               progress=lambda f: report(0.7 + 0.3 * f))
+        out[penumbra] = (samples * out[penumbra] + more * extra[penumbra]) / (samples + more)
+        rays = rays + extra_rays
+    return out, int(probe_rays.sum() + rays.sum())
