@@ -32,8 +32,8 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .formfactor import disk_ff, fan_ff
-from .hemisphere import BINS, CELL, Splat, add, bins_vec, frame_of, raise_to, splat_of
+from .formfactor import PLANE_EPS, disk_ff, fan_ff, triangle_ff
+from .hemisphere import BINS, CELL, bins_vec, frame_of, splat_of
 from .hierarchy import Nodes
 from .problem import Surfels
 from .traversal import cut_advance, cut_begin, cut_skip, cut_weight, opening
@@ -65,39 +65,41 @@ class Gather:
 
 @wp.func
 def cluster_ff(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float,
-               leaves: float) -> float:
-    """Form factor of a cluster of ``leaves`` disks: as many disks of its mean area at its centre
-    (their sum, not one disk of the whole area, whose π d² + A denominator would be too large) for
-    aligned normals (spread 1); an isotropic blob of projected area A/4 (a closed convex surface's
-    mean) where they cancel (spread 0); linearly between."""
+               leaves: float) -> wp.vec2:
+    """Form factors (front, back) of a cluster of ``leaves`` disks: as many disks of its mean area
+    at its centre (their sum, not one disk of the whole area, whose π d² + A denominator would be
+    too large) for aligned normals (spread 1), facing with nq (front) or against it (back); an
+    isotropic blob of projected area A/4 (a closed convex surface's mean) where they cancel
+    (spread 0), the same from either side; linearly between."""
     d = q - p
     d2 = wp.dot(d, d)
     if d2 <= 0.0:
-        return 0.0
-    cos_r = wp.max(wp.dot(n, d) / wp.sqrt(d2), 0.0)
+        return wp.vec2(0.0, 0.0)
+    inv = 1.0 / wp.sqrt(d2)
+    cos_r = wp.max(wp.dot(n, d) * inv, 0.0)
     each = area / leaves
-    iso = 0.25 * area * cos_r / (3.141592653589793 * d2 + 0.25 * each)
-    return spread * leaves * disk_ff(p, n, q, nq, each) + (1.0 - spread) * iso
+    iso = (1.0 - spread) * 0.25 * area * cos_r / (3.141592653589793 * d2 + 0.25 * each)
+    # disk_ff of both faces at once: cos_E is −nq·d̂ for the front and +nq·d̂ for the back
+    cos_e = -wp.dot(nq, d) * inv
+    disks = spread * leaves * each * cos_r / (3.141592653589793 * d2 + each)
+    return wp.vec2(disks * wp.max(cos_e, 0.0) + iso, disks * wp.max(-cos_e, 0.0) + iso)
 
 
-@wp.func
-def fan_centre(s: Surfels, e: int) -> wp.vec3:
-    """The area-weighted centre of element e's share of its triangles (a third each, around its
-    vertex)."""
-    total = float(0.0)
-    acc = wp.vec3(0.0)
-    pv = s.points[s.vertex[e]]
-    for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
-        tri = s.fan_triangles[k]
-        a = s.points[s.tris[3 * tri]]
-        b = s.points[s.tris[3 * tri + 1]]
-        c = s.points[s.tris[3 * tri + 2]]
-        w = wp.length(wp.cross(b - a, c - a))
-        total += w
-        acc += w * (pv + (a + b + c) / 3.0) * 0.5
-    if total > 0.0:
-        return acc / total
-    return pv
+def fan_centres(problem) -> np.ndarray:
+    """float32[n,3]: the area-weighted centre of each element's share of its triangles (a third
+    each, around its vertex; the vertex itself where they have no area)."""
+    els, scene = problem.elements, problem.scene
+    pos = np.asarray(scene.positions, np.float64)
+    counts = np.diff(els.fan_offsets)
+    owner = np.repeat(np.arange(els.count), counts)
+    corners = pos[scene.triangles[els.fan_triangles[:els.fan_offsets[-1]]]]
+    w = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    pv = pos[els.vertex]
+    acc = np.zeros((els.count, 3))
+    np.add.at(acc, owner, w[:, None] * 0.5 * (pv[owner] + corners.mean(axis=1)))
+    total = np.bincount(owner, weights=w, minlength=els.count)
+    out = np.where(total[:, None] > 0, acc / np.where(total > 0, total, 1.0)[:, None], pv)
+    return out.astype(np.float32)
 
 
 @wp.func
@@ -107,15 +109,38 @@ def leaf_blend(d2: float, area: float) -> float:
 
 
 @wp.func
-def leaf_direction(t: Nodes, s: Surfels, node: int, p: wp.vec3, d2: float) -> wp.vec3:
+def leaf_direction(t: Nodes, centres: wp.array(dtype=wp.vec3), node: int, p: wp.vec3,
+                   d2: float) -> wp.vec3:
     """Where a leaf lies as seen from p: its disk's centre far away, the centre of its triangles
-    near (blended as its transfer is): the direction stays defined for a receiver on the element
-    itself."""
+    (``fan_centres``) near, blended as its transfer is: the direction stays defined for a
+    receiver on the element itself."""
     blend = leaf_blend(d2, t.area[node])
     v = t.position[node] - p
     if blend < 1.0:
-        v = blend * v + (1.0 - blend) * (fan_centre(s, t.element[node]) - p)
+        v = blend * v + (1.0 - blend) * (centres[t.element[node]] - p)
     return wp.normalize(v)
+
+
+@wp.func
+def fan_sides(p: wp.vec3, n: wp.vec3, j: int, s: Surfels) -> wp.vec2:
+    """``formfactor.fan_ff`` of both sides of element j at once: (front, back), each of its
+    triangles counting for the side p lies on."""
+    front = float(0.0)
+    back = float(0.0)
+    for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
+        tri = s.fan_triangles[k]
+        a = s.points[s.tris[3 * tri]]
+        b = s.points[s.tris[3 * tri + 1]]
+        c = s.points[s.tris[3 * tri + 2]]
+        nt = wp.cross(b - a, c - a)
+        h = wp.dot(p - a, nt)
+        lnt = wp.length(nt)
+        eps = PLANE_EPS * lnt * (wp.length(p - a) + wp.sqrt(lnt))
+        if h > eps:
+            front += triangle_ff(p, n, a, b, c)
+        elif -h > eps:
+            back += triangle_ff(p, n, a, b, c)
+    return wp.vec2(front, back) / 3.0
 
 
 @wp.func
@@ -135,11 +160,14 @@ def leaf_transfer(t: Nodes, s: Surfels, node: int, p: wp.vec3, n: wp.vec3, d2: f
         # A surface facing the receiver in its own plane is in contact with it (a box resting on
         # the floor): seen from a hair off the receiver, as Cycles' offset rays see it, it covers
         # the hemisphere instead of vanishing edge-on.
-        pe = p
         if wp.dot(nq, n) < 0.0:
             pe = p - n * (CONTACT * wp.sqrt(a))
-        out[2] = (1.0 - blend) * fan_ff(pe, n, e, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-        out[3] = (1.0 - blend) * fan_ff(p, n, e, -1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+            out[2] = (1.0 - blend) * fan_ff(pe, n, e, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+            out[3] = (1.0 - blend) * fan_ff(p, n, e, -1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+        else:
+            sides = (1.0 - blend) * fan_sides(p, n, e, s)
+            out[2] = sides[0]
+            out[3] = sides[1]
     return out
 
 
@@ -161,35 +189,19 @@ class Cover:
 
 
 @wp.func
-def cover_empty() -> Cover:
+def _cover(front: bins_vec, peak: bins_vec, back: bins_vec, near: bins_vec, near_back: bins_vec,
+           red: bins_vec, green: bins_vec, blue: bins_vec, near_light: wp.vec3) -> Cover:
     c = Cover()
-    c.front = bins_vec()
-    c.peak = bins_vec()
-    c.back = bins_vec()
-    c.near = bins_vec()
-    c.near_back = bins_vec()
-    c.red = bins_vec()
-    c.green = bins_vec()
-    c.blue = bins_vec()
-    c.near_light = wp.vec3(0.0)
+    c.front = front
+    c.peak = peak
+    c.back = back
+    c.near = near
+    c.near_back = near_back
+    c.red = red
+    c.green = green
+    c.blue = blue
+    c.near_light = near_light
     return c
-
-
-@wp.func
-def cover_add(c: Cover, sp: Splat, part: wp.vec4, light: wp.vec3) -> Cover:
-    """``c`` with one sender's parts (far front, far back, exact front, exact back) and its
-    radiance ``light`` added in the cells of ``sp``."""
-    out = c
-    out.front = add(c.front, sp, part[0])
-    out.peak = raise_to(c.peak, sp, part[0])
-    out.back = add(c.back, sp, part[1])
-    out.near = add(c.near, sp, part[2])
-    out.near_back = add(c.near_back, sp, part[3])
-    out.red = add(c.red, sp, light[0] * part[0])
-    out.green = add(c.green, sp, light[1] * part[0])
-    out.blue = add(c.blue, sp, light[2] * part[0])
-    out.near_light = c.near_light + light * part[2]
-    return out
 
 
 @wp.func
@@ -213,7 +225,8 @@ def cover_resolve(c: Cover) -> wp.vec4:
 
 @wp.kernel
 def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=wp.vec3), t: Nodes,
-                   s: Surfels, distance: float, open_k: float, with_light: int,
+                   s: Surfels, centres: wp.array(dtype=wp.vec3), distance: float, open_k: float,
+                   with_light: int,
                    radiance: wp.array(dtype=wp.vec3), out_access: wp.array(dtype=wp.float32),
                    out_bent: wp.array(dtype=wp.vec3), out_light: wp.array(dtype=wp.vec3),
                    out_visits: wp.array(dtype=wp.int32)):
@@ -221,7 +234,15 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     p = rp[i]
     n = rn[i]
     f = frame_of(n)
-    cover = cover_empty()
+    front = bins_vec()
+    peak = bins_vec()
+    back = bins_vec()
+    near = bins_vec()
+    near_back = bins_vec()
+    red = bins_vec()
+    green = bins_vec()
+    blue = bins_vec()
+    near_light = wp.vec3(0.0)
     raw = float(0.0)
     dirsum = wp.vec3(0.0)
     visits = int(0)
@@ -251,23 +272,42 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                 # A far node straddling the AO distance counts with the part of its depth inside
                 # (opening it down to the leaves would visit a whole shell of them per receiver).
                 share = w * take * wp.clamp((distance - dist + r) / (2.0 * r), 0.0, 1.0)
-                q = t.position[node]
-                nq = t.normal[node]
-                part[0] = share * cluster_ff(p, n, q, nq, t.area[node], t.spread[node], t.leaves[node])
-                part[1] = share * cluster_ff(p, n, q, -nq, t.area[node], t.spread[node], t.leaves[node])
+                sides = share * cluster_ff(p, n, t.position[node], t.normal[node], t.area[node],
+                                           t.spread[node], t.leaves[node])
+                part[0] = sides[0]
+                part[1] = sides[1]
         cut = cut_advance(t, cut, take)
         total = part[0] + part[1] + part[2] + part[3]
         if total > 0.0:
             dhat = v / dist
             if leaf:
-                dhat = leaf_direction(t, s, node, p, d2)
+                dhat = leaf_direction(t, centres, node, p, d2)
             raw += total
             dirsum += dhat * total
             light = wp.vec3(0.0)
             if with_light != 0:
                 light = radiance[node]
-            cover = cover_add(cover, splat_of(f, dhat), part, light)
-    res = cover_resolve(cover)
+            # the sender's parts (far front, far back, exact front, exact back) and its radiance
+            # into the cells around its direction, in local tables (updated in place: a struct
+            # field's table would be copied on every access)
+            sp = splat_of(f, dhat)
+            for c in range(4):
+                cell = sp.cells[c]
+                wc = sp.weights[c]
+                if part[0] > 0.0:
+                    fc = part[0] * wc
+                    front[cell] += fc
+                    peak[cell] = wp.max(peak[cell], fc)
+                    red[cell] += light[0] * fc
+                    green[cell] += light[1] * fc
+                    blue[cell] += light[2] * fc
+                if part[1] > 0.0:
+                    back[cell] += part[1] * wc
+                if part[2] > 0.0 or part[3] > 0.0:
+                    near[cell] += part[2] * wc
+                    near_back[cell] += part[3] * wc
+            near_light += light * part[2]
+    res = cover_resolve(_cover(front, peak, back, near, near_back, red, green, blue, near_light))
     occ = res[0]
     out_access[i] = wp.clamp(1.0 - occ, 0.0, 1.0)
     out_visits[i] = visits
@@ -307,7 +347,9 @@ def gather(problem, points: np.ndarray, normals: np.ndarray, distance: float,
         _gather_kernel, count,
         [wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
-         tree.nodes, problem.surfels, float(distance), float(open_k), int(with_light), radiance,
+         tree.nodes, problem.surfels,
+         wp.array(fan_centres(problem), dtype=wp.vec3, device=d), float(distance), float(open_k),
+         int(with_light), radiance,
          access, bent, light, visits],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
     return Gather(access.numpy(), bent.numpy(), light.numpy() if with_light else None, visits.numpy())
