@@ -26,6 +26,8 @@ from .outputs import OutputError, Staging, check_folder
 from .write import name_clash
 
 UV_NAME = "Lightmap"
+# The object property holding an object's own texel density (0 or absent: the scene's).
+DENSITY_PROP = "radiosity_baker_texel_density"
 MAX_UV_LAYERS = 8
 UV_TAG = "radiosity_baker_uv"
 IMAGE_TAG = "radiosity_baker_lightmap"
@@ -68,6 +70,15 @@ def output_folder(settings) -> Path:
     folder = Path(bpy.path.abspath(text)).resolve()
     check_folder(folder, f"lightmaps to {folder}")
     return folder
+
+
+def object_density(ob):
+    """The object's own texel density (its ``DENSITY_PROP``), None where it has none (0): read
+    where the add-on keeps it, also when the add-on is not registered (the bpy-module command line)."""
+    value = getattr(ob, DENSITY_PROP, None)
+    if value is None:
+        value = ob.bl_system_properties_get().get(DENSITY_PROP)
+    return float(value) if value else None
 
 
 def _check_uv_name(ob, me) -> None:
@@ -120,14 +131,16 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
         targets.append(LightmapTarget(
             object_name=ob.name, mesh_name=me.name, corner_vert=t.corner_vert,
             corner_triangles=t.corner_triangles,
-            triangle_offset=t.triangle_offset, corner_uv=corner_uv))
+            triangle_offset=t.triangle_offset, corner_uv=corner_uv,
+            density=object_density(ob)))
     if not targets:
         raise ExtractionError("no object can be lightmapped" + (f": {warnings[-1]}" if warnings else ""))
     return LightmapRequest(targets, python=python_executable(), cache_dir=_cache_dir()), warnings
 
 
 def write_files(result, settings) -> dict[str, Path]:
-    """Write each page as ``<folder>/<page>.exr`` plus a ``.png`` preview; {page name: exr path}.
+    """Write each page as ``<folder>/<page>.exr`` (a tile of a UDIM set as ``<image>.<tile>.exr``)
+    plus a ``.png`` preview; {page stem: exr path}.
 
     All files are written under temporary names, read back, then moved into place together: on
     any failure (OutputError) the folder is as it was.
@@ -136,9 +149,9 @@ def write_files(result, settings) -> dict[str, Path]:
     paths = {}
     with Staging() as staging:
         for page in result.pages:
-            stem = bpy.path.clean_name(page.name)
-            paths[page.name] = folder / f"{stem}.exr"
-            with staging.writing(paths[page.name]) as temp:
+            stem = _file_stem(page)
+            paths[page.stem] = folder / f"{stem}.exr"
+            with staging.writing(paths[page.stem]) as temp:
                 files.write_exr(temp, page.rgb, settings.lightmap_format)
                 files.verify(temp, page.size)
             with staging.writing(folder / f"{stem}.png") as temp:
@@ -162,8 +175,11 @@ class LightmapWrites:
         returns all warnings."""
         for me, uv in self.uv:
             _write_uv(me, uv)
-        images = {page.name: _load_image(page.name, paths[page.name], settings.pack_images)
-                  for page in result.pages}
+        images = {}
+        for page in result.pages:  # the tiles of a UDIM set make one image, loaded through any
+            if page.name not in images:
+                images[page.name] = _load_image(page.name, paths[page.stem], page.tile is not None,
+                                                settings.pack_images)
         warnings = list(self.warnings)
         for mat, page in self.hookups:
             warnings += _hook_up(mat, images[page], settings.hookup == "multiply")
@@ -235,19 +251,29 @@ def _write_uv(me, uv: np.ndarray) -> None:
     me.update()
 
 
-def _load_image(name: str, path: Path, pack: bool):
-    """Our image ``name`` reloaded from ``path``, or a new one loaded from it (a user's image of
-    that name is left alone: Blender gives ours a numbered name)."""
+def _file_stem(page) -> str:
+    """The file name of ``page`` without extension, safe on every file system."""
+    return bpy.path.clean_name(page.name) + ("" if page.tile is None else f".{page.tile}")
+
+
+def _load_image(name: str, path: Path, tiled: bool, pack: bool):
+    """Our image ``name`` reloaded from ``path`` (with ``tiled``, one tile file of its UDIM set:
+    Blender finds the others), or a new one loaded from it (a user's image of that name is left
+    alone: Blender gives ours a numbered name)."""
     image = next((im for im in bpy.data.images if im.get(IMAGE_TAG) == name), None)
-    if image is not None and Path(bpy.path.abspath(image.filepath)).resolve() == path:
-        if image.packed_file is not None:
-            image.unpack(method="REMOVE")
-        image.reload()
-    else:
+    if image is None:
         image = bpy.data.images.load(str(path), check_existing=False)
         image.name = name
         image[IMAGE_TAG] = name
         image.use_fake_user = True  # kept in the saved file even before a material uses it
+    else:  # ours from an earlier bake: point it at the new files
+        if image.packed_file is not None or len(image.packed_files):
+            image.unpack(method="REMOVE")
+        image.source = "FILE"
+        image.filepath = str(path)
+    if tiled:
+        image.source = "TILED"  # from the file name's tile number Blender finds the whole set
+    image.reload()
     image.colorspace_settings.name = COLORSPACE
     if pack:
         image.pack()

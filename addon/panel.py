@@ -37,14 +37,18 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col.prop(s, "attribute")
         col.prop(s, "device")
         col = layout.column(align=True)
-        for name in ("light_samples", "visibility_rays", "bounces", "ao_distance"):
+        for name in ("light_samples", "light_selection", "visibility_rays", "bounces", "ao_distance"):
             _prop(col, s, name)
         layout.prop(s, "bake_copy")
         col = layout.column(heading="Lightmap")
         col.active = s.target != "vertex_colors"
-        for name in ("texel_density", "max_size", "padding", "layout", "output", "hookup",
-                     "reunwrap", "supersample", "texel_indirect", "lightmap_format", "pack_images"):
+        for name in ("texel_density", "max_size", "atlas_pages", "padding", "layout", "output",
+                     "hookup", "reunwrap", "supersample", "texel_indirect", "texel_shadows",
+                     "shadow_budget", "lightmap_format", "pack_images"):
             _prop(col, s, name)
+        ob = context.object
+        if ob is not None and ob.type == 'MESH':
+            col.prop(ob, "radiosity_baker_texel_density", text=f"{ob.name} Density")
         row = layout.row()
         row.scale_y = 1.5
         row.operator(OBJECT_OT_radiosity_bake.bl_idname, text="Bake", icon='RENDER_STILL')

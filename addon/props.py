@@ -75,14 +75,21 @@ def store_stats(scene, result, seconds: float) -> None:
 
 classes = (RadiosityBakeStats, RadiosityBakeSettings)
 
+# An object's own lightmap texel density (``addon.lightmap.DENSITY_PROP``).
+OBJECT_DENSITY = FloatProperty(
+    name="Object Texel Density", default=0.0, min=0.0, soft_max=1000.0,
+    description="This object's lightmap texels per metre of surface; 0 uses the bake's Texel Density")
+
 
 def register() -> None:
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.radiosity_baker = PointerProperty(type=RadiosityBakeSettings)
+    bpy.types.Object.radiosity_baker_texel_density = OBJECT_DENSITY
 
 
 def unregister() -> None:
+    del bpy.types.Object.radiosity_baker_texel_density
     del bpy.types.Scene.radiosity_baker
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -34,6 +34,7 @@ METHODS = _Methods()
 CONTENTS = ("lighting", "combined", "indirect", "ao")
 TARGETS = ("vertex_colors", "lightmap", "both")
 LAYOUTS = ("atlas", "per_object")
+ATLAS_PAGES = ("many", "one")
 HOOKUPS = ("none", "node", "multiply")
 LIGHTMAP_FORMATS = ("half", "float")
 TEXEL_INDIRECT = ("gather", "interpolate")
@@ -53,6 +54,9 @@ CHOICE_HELP = {
     "both": "A color attribute and lightmaps",
     "atlas": "One lightmap shared by all baked objects",
     "per_object": "One lightmap per object",
+    "many": "More pages (a UDIM tile set: Lightmap.1001, .1002 …), each object whole on one, at "
+            "its density",
+    "one": "One page, the density lowered until everything fits",
     "none": "Leave materials alone",
     "node": "Add a UV Map + Image Texture node pair showing the lightmap to each material",
     "multiply": "Add the node pair and multiply the lightmap into the Base Color",
@@ -144,8 +148,10 @@ class Settings:
                                  soft_high=100.0, length=True)
     texel_density: float = _option(20.0, "Texel Density", "lightmap texels per metre of surface",
                                    "lightmap", low=1e-3, soft_high=1000.0)
-    max_size: int = _option(1024, "Max Size", "largest lightmap side in texels; the density is "
-                            "lowered until the atlas fits", "lightmap", low=16, soft_high=8192)
+    max_size: int = _option(1024, "Max Size", "largest lightmap side in texels (each page of an "
+                            "atlas of several is this size)", "lightmap", low=16, soft_high=8192)
+    atlas_pages: str = _option("many", "Atlas Pages", "what happens when the charts do not fit "
+                               "one page at the asked density", "lightmap", choices=ATLAS_PAGES)
     padding: int = _option(4, "Padding", "texels between lightmap charts, filled by dilation",
                            "lightmap", low=1, soft_high=16)
     layout: str = _option("atlas", "Layout", "one lightmap for all baked objects or one each",

@@ -1,41 +1,47 @@
-"""xatlas in its own process: ``python _xatlas_worker.py IN.npz OUT.npz``.
+"""xatlas in its own process: ``python _xatlas_worker.py charts|pack IN.npz OUT.npz``.
 
 xatlas holds the GIL for its whole run and can crash on bad input, so it never runs inside Blender's
 process. This script imports nothing of the package (nor bpy): only numpy and xatlas.
 
-IN holds ``atlases`` (count) and per atlas ``a`` / mesh ``m``: ``a{a}_m{m}_pos`` float32[N,3]
-(metres), ``a{a}_m{m}_idx`` uint32[M,3], ``a{a}_meshes``, ``a{a}_density`` (texels per metre),
-``a{a}_max_size``, ``a{a}_padding`` (texels). OUT holds per atlas ``a{a}_size`` (width, height),
-``a{a}_density`` (the density used: lowered until the atlas fits one page of max_size), and per
-mesh ``a{a}_m{m}_vmap`` uint32[K], ``a{a}_m{m}_idx`` uint32[M,3], ``a{a}_m{m}_uv`` float32[K,2]
-in [0,1] of the page.
+``charts``: IN holds ``meshes`` (count) and per mesh ``m{m}_pos`` float32[N,3] (metres),
+``m{m}_idx`` uint32[M,3], ``m{m}_density`` (texels per metre), and ``padding`` (texels). Each mesh
+is cut into charts and laid out alone; OUT holds per mesh ``m{m}_uv`` float32[K,2] (texels),
+``m{m}_idx`` uint32[M,3] (the triangles over those UV vertices, in the input's order) and
+``m{m}_chart`` int32[K] (the chart of each UV vertex).
+
+``pack``: IN holds ``max_size``, ``padding``, ``many`` (1: as many pages as needed, each mesh
+whole on one; 0: one page, everything scaled down until it fits) and ``groups``, each packed by
+itself, its names prefixed ``g{g}_``: ``meshes`` and per mesh ``m{m}_uv``, ``m{m}_idx``,
+``m{m}_chart`` (as ``charts`` gave them, texels). OUT holds per group (prefixed alike) ``pages``,
+``p{p}_size`` (width, height) and per mesh ``m{m}_page``, ``m{m}_scale`` (1, or less where the mesh
+was scaled down to fit), ``m{m}_uv`` float32[K,2] in [0,1] of its page and ``m{m}_idx``
+uint32[M,3].
 """
 import sys
 
 import numpy as np
 import xatlas
 
-# Each retry lowers the density a little more than the overshoot, so few retries are needed.
-SHRINK_MARGIN = 0.98
-MAX_TRIES = 16
 # xatlas drops faces under its fixed epsilons (an area of about 1e-7 and lengths of 1e-4 in its
 # units), so a mesh measured in millimetres gets no chart at all. Such meshes are scaled up by a
 # power of two (exact in floating point) until the median triangle has at least this area (m²);
 # the density is scaled down alike, so the layout in texels is the same.
 MIN_MEDIAN_AREA = 1e-4
+# Pages are filled up to this share of their texels by the charts' bounding boxes before xatlas
+# packs them; a page that overflows hands its smallest meshes on to the next.
+FILL = 0.7
+# Each retry of a layout that does not fit shrinks it a little more than the overshoot.
+SHRINK_MARGIN = 0.98
+MAX_TRIES = 48
 
 
-def _generate(meshes, density: float, padding: int):
-    atlas = xatlas.Atlas()
-    for pos, idx in meshes:
-        atlas.add_mesh(pos, idx)
+def _pack_options(resolution: int, density: float, padding: int):
     pack = xatlas.PackOptions()
-    pack.resolution = 0  # the smallest page at this density
+    pack.resolution = resolution  # 0: the smallest page at this density
     pack.texels_per_unit = density
     pack.padding = padding
     pack.bilinear = True
-    atlas.generate(xatlas.ChartOptions(), pack)
-    return atlas
+    return pack
 
 
 def _areas(pos: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -53,42 +59,127 @@ def _scale(areas: np.ndarray) -> float:
     return 2.0 ** np.ceil(0.5 * np.log2(MIN_MEDIAN_AREA / median))
 
 
-def main(path_in: str, path_out: str) -> int:
-    data = np.load(path_in)
+def charts(data) -> dict:
     out = {}
-    for a in range(int(data["atlases"])):
-        meshes = [(np.ascontiguousarray(data[f"a{a}_m{m}_pos"], np.float32),
-                   np.ascontiguousarray(data[f"a{a}_m{m}_idx"], np.uint32))
-                  for m in range(int(data[f"a{a}_meshes"]))]
-        max_size = int(data[f"a{a}_max_size"])
-        padding = int(data[f"a{a}_padding"])
-        areas = np.concatenate([_areas(pos, idx) for pos, idx in meshes])
-        scale = _scale(areas)
-        meshes = [(pos * np.float32(scale), idx) for pos, idx in meshes]
-        # No page can hold more texels than max_size²: start at most at the density that fills
-        # it exactly (a far too high density makes xatlas build enormous charts first). From here
-        # on the density is per unit of the scaled positions.
-        area = float(areas.sum()) * scale * scale
-        density = min(float(data[f"a{a}_density"]) / scale, max_size / max(area, 1e-30) ** 0.5)
+    padding = int(data["padding"])
+    for m in range(int(data["meshes"])):
+        pos = np.ascontiguousarray(data[f"m{m}_pos"], np.float32)
+        idx = np.ascontiguousarray(data[f"m{m}_idx"], np.uint32)
+        scale = _scale(_areas(pos, idx))
+        atlas = xatlas.Atlas()
+        atlas.add_mesh(pos * np.float32(scale), idx)
+        atlas.generate(xatlas.ChartOptions(), _pack_options(0, float(data[f"m{m}_density"]) / scale, padding))
+        _, tri, uv = atlas[0]
+        _, chart = atlas.get_mesh_vertex_assignment(0)
+        out[f"m{m}_uv"] = (uv * np.array([atlas.width, atlas.height], np.float64)).astype(np.float32)
+        out[f"m{m}_idx"] = tri
+        out[f"m{m}_chart"] = chart.astype(np.int32)
+    return out
+
+
+def _footprint(uv: np.ndarray, chart: np.ndarray, padding: int):
+    """(texels the charts' padded boxes cover, their longest side) of one mesh's charts."""
+    n = int(chart.max()) + 1 if chart.size else 0
+    lo = np.full((n, 2), np.inf)
+    hi = np.full((n, 2), -np.inf)
+    np.minimum.at(lo, chart, uv)
+    np.maximum.at(hi, chart, uv)
+    side = np.maximum(hi - lo, 0.0) + 2 * padding + 1
+    return float(np.prod(side, axis=1).sum()), float(side.max()) if n else 0.0
+
+
+def _layout(meshes: list, scales: list, resolution: int, padding: int):
+    """xatlas packing of UV meshes (texels, each scaled by its factor) onto pages of
+    ``resolution`` (0: one page, as small as it gets): the atlas."""
+    atlas = xatlas.Atlas()
+    for (uv, idx, _), s in zip(meshes, scales):
+        atlas.add_uv_mesh(np.ascontiguousarray(uv * np.float32(s), np.float32), idx)
+    atlas.generate(xatlas.ChartOptions(), _pack_options(resolution, 1.0, padding))
+    return atlas
+
+
+def _fits_alone(mesh, max_size: int, padding: int) -> float:
+    """The scale (≤ 1) at which one mesh's charts fit a page of max_size by themselves."""
+    area, side = _footprint(mesh[0], mesh[2], padding)
+    if 2 * side <= max_size and 4 * area <= FILL * max_size * max_size:
+        return 1.0  # far smaller than a page
+    s = min(1.0, (max_size - 2 * padding - 1) / max(side, 1e-9), max_size / max(area, 1e-9) ** 0.5)
+    for _ in range(MAX_TRIES):
+        count = _layout([mesh], [s], max_size, padding).atlas_count
+        if count <= 1:
+            return s
+        s *= 0.95  # a page short: a little smaller each try
+    raise RuntimeError(f"xatlas: no page of {max_size} texels holds a mesh")
+
+
+def pack(data) -> dict:
+    max_size, padding, many = int(data["max_size"]), int(data["padding"]), bool(int(data["many"]))
+    meshes = [(np.asarray(data[f"m{m}_uv"], np.float32), np.ascontiguousarray(data[f"m{m}_idx"], np.uint32),
+               np.asarray(data[f"m{m}_chart"], np.int64)) for m in range(int(data["meshes"]))]
+    out = {}
+    if not many:
+        s = 1.0
         for _ in range(MAX_TRIES):
-            atlas = _generate(meshes, density, padding)
-            side = max(atlas.width, atlas.height)
-            if atlas.atlas_count <= 1 and side <= max_size:
+            atlas = _layout(meshes, [s] * len(meshes), 0, padding)
+            longest = max(atlas.width, atlas.height)
+            if atlas.atlas_count <= 1 and longest <= max_size:
                 break
-            density *= SHRINK_MARGIN * max_size / max(side, max_size + 1) / max(1, atlas.atlas_count) ** 0.5
+            s *= SHRINK_MARGIN * max_size / max(longest, max_size + 1)
         else:
-            print(f"xatlas: no single page of {max_size} texels found", file=sys.stderr)
-            return 3
-        out[f"a{a}_size"] = np.array([atlas.width, atlas.height], np.int64)
-        out[f"a{a}_density"] = np.array(density * scale)
-        for m in range(len(meshes)):
-            vmap, idx, uv = atlas[m]
-            out[f"a{a}_m{m}_vmap"] = vmap
-            out[f"a{a}_m{m}_idx"] = idx
-            out[f"a{a}_m{m}_uv"] = uv
+            raise RuntimeError(f"xatlas: no single page of {max_size} texels found")
+        pages = [(list(range(len(meshes))), atlas)]
+        scales = [s] * len(meshes)
+    else:
+        scales = [_fits_alone(mesh, max_size, padding) for mesh in meshes]
+        atlas = _layout(meshes, scales, 0, padding)
+        pages = []
+        if atlas.atlas_count <= 1 and max(atlas.width, atlas.height) <= max_size:
+            pages.append((list(range(len(meshes))), atlas))  # one page, as small as it gets
+        area = [_footprint(mesh[0] * s, mesh[2], padding)[0] for mesh, s in zip(meshes, scales)]
+        todo = [] if pages else sorted(range(len(meshes)), key=lambda m: -area[m])
+        while todo:
+            group, used = [], 0.0
+            for m in todo:  # first fit: largest first, up to the fill
+                if not group or used + area[m] <= FILL * max_size * max_size:
+                    group.append(m)
+                    used += area[m]
+            while True:
+                atlas = _layout([meshes[m] for m in group], [scales[m] for m in group], max_size, padding)
+                if atlas.atlas_count <= 1 or len(group) == 1:
+                    break
+                group = group[:max(1, (len(group) * 3) // 4)]  # hand the smallest on
+            pages.append((group, atlas))
+            todo = [m for m in todo if m not in set(group)]
+    out["pages"] = np.array(len(pages))
+    for p, (group, atlas) in enumerate(pages):
+        out[f"p{p}_size"] = np.array([atlas.width, atlas.height], np.int64)
+        for k, m in enumerate(group):
+            _, idx, uv = atlas[k]
+            out[f"m{m}_page"] = np.array(p)
+            out[f"m{m}_scale"] = np.array(scales[m])
+            out[f"m{m}_uv"] = uv
+            out[f"m{m}_idx"] = idx
+    return out
+
+
+def main(command: str, path_in: str, path_out: str) -> int:
+    data = np.load(path_in)
+    try:
+        if command == "charts":
+            out = charts(data)
+        else:  # several groups, each packed by itself: g{g}_ before every name of one
+            out = {}
+            for g in range(int(data["groups"])):
+                prefix = f"g{g}_"
+                group = {k[len(prefix):]: data[k] for k in data.files if k.startswith(prefix)}
+                group.update({k: data[k] for k in ("max_size", "padding", "many")})
+                out.update({prefix + k: v for k, v in pack(group).items()})
+    except RuntimeError as exc:
+        print(exc, file=sys.stderr)
+        return 3
     np.savez(path_out, **out)
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1], sys.argv[2]))
+    sys.exit(main(sys.argv[1], sys.argv[2], sys.argv[3]))

@@ -15,6 +15,8 @@ from ..errors import BakeError
 from . import raster, shadows, unwrap
 
 ATLAS_NAME = "Lightmap"
+# The UDIM tile of an atlas's first page.
+UDIM_FIRST = 1001
 
 
 @dataclass
@@ -25,7 +27,7 @@ class LightmapTarget:
     corner_vert: int32[C] mesh vertex of each face corner; corner_triangles: int32[T,3] face
     corners of the object's triangles, which are SceneData triangles ``triangle_offset … + T``
     (in their corner order). corner_uv: float32[C,2] the mesh's existing ``Lightmap`` UVs to reuse,
-    None to unwrap.
+    None to unwrap. density: its own texel density (texels per metre), None for the settings'.
     """
 
     object_name: str
@@ -34,6 +36,7 @@ class LightmapTarget:
     corner_triangles: np.ndarray
     triangle_offset: int
     corner_uv: Optional[np.ndarray] = None
+    density: Optional[float] = None
 
 
 @dataclass
@@ -48,32 +51,51 @@ class LightmapRequest:
 
 @dataclass
 class Page:
-    """One lightmap image: ``rgb`` float32[H,W,3] linear (row 0 = v 0, Blender's bottom row),
+    """One lightmap page: ``rgb`` float32[H,W,3] linear (row 0 = v 0, Blender's bottom row),
     ``covered`` bool[H,W] texels on a chart (the rest is dilated padding or empty), the
-    ``objects`` whose ``Lightmap`` UVs point into it, and the texel ``density`` (texels/m)."""
+    ``objects`` whose ``Lightmap`` UVs point into it and the lowest texel ``density`` among them
+    (texels/m). ``name`` is its image's; ``tile`` its UDIM tile number when the image is a tile set
+    (an atlas of several pages), else None."""
 
     name: str
     objects: list
     rgb: np.ndarray
     covered: np.ndarray
     density: float
+    tile: Optional[int] = None
 
     @property
     def size(self) -> tuple:
         return int(self.rgb.shape[1]), int(self.rgb.shape[0])
 
+    @property
+    def stem(self) -> str:
+        """Its file name without extension: ``Lightmap``, or ``Lightmap.1002`` for a tile."""
+        return self.name if self.tile is None else f"{self.name}.{self.tile}"
+
 
 @dataclass
 class LightmapResult:
-    """pages; uv: {mesh name: float32[C,2]} layouts made by this bake (to write as ``Lightmap``);
-    seam_error: largest difference across smooth UV seams relative to the brightest texel of its
-    page (0 without seams); texels: covered texels; warnings."""
+    """pages; uv: {mesh name: float32[C,2]} layouts made by this bake (to write as ``Lightmap``;
+    a tile set's UVs lie in their tiles, u + k for the k-th page); seam_error: largest difference
+    across smooth UV seams relative to the brightest texel of its page (0 without seams); texels:
+    covered texels; warnings; densities: {object: (asked, used)} texels per metre."""
 
     pages: list
     uv: dict
     seam_error: float = 0.0
     texels: int = 0
     warnings: list = field(default_factory=list)
+    densities: dict = field(default_factory=dict)
+
+    def report(self) -> dict:
+        """What a bake report says of the lightmaps: each page (image, UDIM tile, size, objects)
+        and each object's texel density, as asked or lowered."""
+        return {"pages": [{"image": p.name, "tile": p.tile, "size": list(p.size), "objects": p.objects}
+                          for p in self.pages],
+                "density": {name: {"asked": round(asked, 4), "used": round(used, 4),
+                                   "note": "as asked" if used >= asked * 0.999 else "lowered"}
+                            for name, (asked, used) in self.densities.items()}}
 
 
 @dataclass
@@ -148,20 +170,49 @@ def _corner_uv(t: LightmapTarget, tri_uv: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def _page_side(owners: list, scene, uvs: dict, settings) -> tuple[tuple, float]:
-    """Size of a page for reused UVs at the requested density (capped by max_size), and the
-    density it gives."""
-    world, texture = 0.0, 0.0
+    """Size of a square page for reused UVs at the owners' asked densities (capped by
+    max_size), and the density it gives."""
+    world, texture, asked = 0.0, 0.0, 0.0
     for o in owners:
         p = scene.positions[scene.triangles[_triangles(o)]].astype(np.float64)
         q = uvs[o.mesh_name][o.corner_triangles].astype(np.float64)
-        world += 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+        area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+        world += area
+        asked += area * _asked(o, settings) ** 2
         e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
         texture += 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
     if texture <= 0.0:
         raise BakeError(f"the Lightmap UVs of {owners[0].object_name} have no area")
-    side = settings.texel_density * np.sqrt(world / texture)
+    side = np.sqrt(asked / texture)
     side = int(min(settings.max_size, max(16, 4 * np.ceil(side / 4))))
     return (side, side), side / np.sqrt(world / texture)
+
+
+def _asked(target: LightmapTarget, settings) -> float:
+    """The texel density asked for ``target`` (texels per metre): its own, else the settings'."""
+    return float(target.density) if target.density else float(settings.texel_density)
+
+
+def _tile_offset(index: int) -> np.ndarray:
+    """float32[2]: where UDIM tile ``UDIM_FIRST + index`` starts in UV space (10 tiles a row)."""
+    return np.array([index % 10, index // 10], np.float32)
+
+
+def _tile_of(tri_uv: np.ndarray) -> int:
+    """The UDIM tile index (0 for UVs in [0,1]²) a mesh's reused UVs (float32[T,3,2]) lie in."""
+    centre = np.nanmedian(tri_uv.reshape(-1, 2), axis=0) if tri_uv.size else np.zeros(2)
+    u, v = (max(0, int(np.floor(c))) for c in np.nan_to_num(centre))
+    return min(u, 9) + 10 * v
+
+
+def _pages(group, tile, members: list, size: tuple, density: float) -> list:
+    """Page entries (image name, UDIM tile, objects, size, density, targets) of one page of
+    ``group``'s layout holding ``members``: one for the atlas, one per object using the mesh in
+    the per-object layout (a mesh shared by several objects gives each its own image)."""
+    if group.per_object:
+        return [(f"{ATLAS_NAME}_{t.object_name}", None, [t.object_name], size, density, [t])
+                for o in members for t in group.objects[o.mesh_name]]
+    return [(group.name, tile, [o.object_name for o in members], size, density, members)]
 
 
 def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> LightmapResult:
@@ -177,52 +228,59 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
     if not request.targets:
         raise BakeError("no object to lightmap")
     groups, warnings = _plan(request.targets, settings)
-    uvs: dict[str, np.ndarray] = {}
-    made: dict[str, np.ndarray] = {}
-    for g in groups:
-        if not g.unwrap:
-            for o in g.owners:
-                uvs[o.mesh_name] = np.asarray(o.corner_uv, np.float32)
-
-    todo = [g for g in groups if g.unwrap]
-    sizes = {}
-    if todo:
-        atlases = stages.run("unwrap", unwrap.unwrap,
+    uvs: dict[str, np.ndarray] = {}  # per mesh: its corner UVs within its page
+    made: dict[str, np.ndarray] = {}  # per mesh laid out now: its corner UVs to write (tile offsets in)
+    densities: dict[str, tuple] = {}  # per object: (asked, used) texels per metre
+    pages = []  # (image name, UDIM tile or None, objects, size, density, targets on it)
+    fresh = [g for g in groups if g.unwrap]
+    if fresh:
+        layouts = stages.run("unwrap", unwrap.unwrap,
                              [[unwrap.ChartMesh(o.object_name, _mesh_vertices(o, scene),
-                                                o.corner_vert[o.corner_triangles]) for o in g.owners]
-                              for g in todo],
-                             settings.texel_density, settings.max_size, settings.padding,
+                                                o.corner_vert[o.corner_triangles], _asked(o, settings))
+                               for o in g.owners] for g in fresh],
+                             settings.max_size, settings.padding, settings.atlas_pages == "many",
                              request.python, request.cache_dir)
-        for g, atlas in zip(todo, atlases):
-            sizes[g.name] = (atlas.size, atlas.density)
-            if atlas.density < settings.texel_density * 0.999:
-                warnings.append(f"lightmap {g.name}: {settings.texel_density:g} texels/m would not fit "
-                                f"{settings.max_size}² texels: {atlas.density:.3g} texels/m used")
-            for o, tri_uv in zip(g.owners, atlas.tri_uv):
+        for g, layout in zip(fresh, layouts):
+            tiled = len(layout.sizes) > 1
+            for o, index, density, tri_uv in zip(g.owners, layout.page, layout.density, layout.tri_uv):
                 uvs[o.mesh_name], conflicts = _corner_uv(o, tri_uv)
-                made[o.mesh_name] = uvs[o.mesh_name]
+                made[o.mesh_name] = uvs[o.mesh_name] + (_tile_offset(index) if tiled else 0.0)
+                for t in g.objects[o.mesh_name]:
+                    densities[t.object_name] = (_asked(o, settings), density)
                 if conflicts:
                     warnings.append(f"{o.object_name}: {conflicts} triangles of polygons cut by a lightmap "
                                     f"chart seam are distorted; triangulate the mesh for exact charts")
+            for index, size in enumerate(layout.sizes):
+                members = [o for o, k in zip(g.owners, layout.page) if k == index]
+                pages += _pages(g, UDIM_FIRST + index if tiled else None, members, size,
+                                min(densities[o.object_name][1] for o in members))
     for g in groups:
-        if g.name not in sizes:
-            sizes[g.name] = _page_side(g.owners, scene, uvs, settings)
-
-    # Pages: (name, objects, size, density, targets whose triangles it holds)
-    pages = []
-    for g in groups:
-        size, density = sizes[g.name]
-        if g.per_object:
-            pages += [(f"{ATLAS_NAME}_{t.object_name}", [t.object_name], size, density, [t])
-                      for t in g.objects[g.owners[0].mesh_name]]
-        else:
-            pages.append((g.name, [o.object_name for o in g.owners], size, density, g.owners))
-
+        if g.unwrap:
+            continue
+        tiles: dict[int, list] = {}
+        for o in g.owners:
+            uv = np.asarray(o.corner_uv, np.float32)
+            tile = _tile_of(uv[o.corner_triangles])
+            uvs[o.mesh_name] = uv - _tile_offset(tile)
+            tiles.setdefault(tile, []).append(o)
+        sides = {tile: _page_side(members, scene, uvs, settings) for tile, members in tiles.items()}
+        side = max(size[0] for size, _ in sides.values())
+        for tile, members in sorted(tiles.items()):
+            density = sides[tile][1] * side / sides[tile][0][0]
+            for o in members:
+                for t in g.objects[o.mesh_name]:
+                    densities[t.object_name] = (_asked(o, settings), density)
+            pages += _pages(g, UDIM_FIRST + tile if len(tiles) > 1 else None, members, (side, side), density)
+    for name, (asked, used) in densities.items():
+        if used < asked * 0.999:
+            warnings.append(f"lightmap of {name}: {asked:g} texels/m would not fit "
+                            f"{settings.max_size}² texels{'' if settings.atlas_pages == 'many' else ' with the others'}: "
+                            f"{used:.3g} texels/m used")
     s = settings.supersample
 
     def rasterize_all():
         out = []
-        for _, _, (w, h), _, members in pages:
+        for _, _, _, (w, h), _, members in pages:
             tri_uv = np.concatenate([uvs[m.mesh_name][m.corner_triangles] for m in members])
             tri_scene = np.concatenate([np.arange(m.triangle_offset, m.triangle_offset
                                                   + m.corner_triangles.shape[0]) for m in members])
@@ -259,12 +317,12 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
 
     def assemble():
         out, start, seam_error = [], 0, 0.0
-        for (name, objects, (w, h), density, members), r in zip(pages, rastered):
+        for (name, tile, objects, (w, h), density, members), r in zip(pages, rastered):
             texels = r[0]
             rgb, covered = _resolve(texels, values[start:start + texels.count], w, h, s)
             start += texels.count
             rgb = dilate(rgb, covered, settings.padding)
-            out.append(Page(name, objects, rgb, covered, density))
+            out.append(Page(name, objects, rgb, covered, density, tile))
             for m in members:
                 seam_error = max(seam_error, seam_difference(
                     rgb, uvs[m.mesh_name], m.corner_triangles, problem.shading.corner[_triangles(m)]))
@@ -273,8 +331,11 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
     result_pages, seam_error = stages.run("dilate", assemble)
     for message in warnings:
         stages.warn(message)
-    return LightmapResult(pages=result_pages, uv=made, seam_error=seam_error,
-                          texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings)
+    result = LightmapResult(pages=result_pages, uv=made, seam_error=seam_error,
+                          texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings,
+                          densities=densities)
+    problem.counts["lightmap"] = result.report()
+    return result
 
 
 def _resolve(texels: raster.Texels, values: np.ndarray, w: int, h: int, s: int):

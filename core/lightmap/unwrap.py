@@ -1,8 +1,12 @@
-"""UV layout of lightmaps with xatlas, run in a bpy-free subprocess and cached per mesh content.
+"""UV layout of lightmaps with xatlas, run in bpy-free subprocesses and cached per mesh content.
 
-Texel density is in texels per metre of world-space surface; an atlas is one page whose side is at
-most ``max_size`` texels: where the density would need more, the worker lowers it until it fits
-(the density used is returned). Charts are ``padding`` texels apart.
+Two steps (``_xatlas_worker.py``): each mesh is cut into charts and laid out alone at its own
+texel density (texels per metre of world-space surface) — meshes are independent, so this runs in
+one process per CPU core and is cached per mesh; then the charts of a group of meshes are packed
+onto pages of at most ``max_size`` texels a side, charts ``padding`` texels apart. With ``many``
+pages the group takes as many as it needs, each mesh whole on one page and its density as asked
+(a mesh too large for a page by itself is scaled down to fit one); otherwise everything goes onto
+one page, scaled down until it fits (the density used is returned per mesh).
 """
 from __future__ import annotations
 
@@ -22,7 +26,7 @@ from ..errors import BakeError
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
-_CACHE_VERSION = b"rb-unwrap-3"
+_CACHE_VERSION = b"rb-unwrap-4"
 
 
 @dataclass
@@ -31,21 +35,25 @@ class ChartMesh:
 
     name: for messages. positions: float32[N,3] world-space vertex positions (m).
     triangles: int32[T,3] vertex indices. NaN / infinite and zero-area triangles are left out.
+    density: texels per metre asked for it.
     """
 
     name: str
     positions: np.ndarray
     triangles: np.ndarray
+    density: float
 
 
 @dataclass
-class Atlas:
-    """One page: ``size`` (width, height) in texels, ``density`` used (texels per metre), and per
-    mesh of the request float32[T,3,2] UVs of each triangle corner in [0,1] of the page (NaN for
-    triangles left out)."""
+class Layout:
+    """The pages of one group: ``sizes`` [(width, height)] in texels per page, and per mesh of
+    the group its ``page`` index, the ``density`` used (texels per metre: as asked, or lower where
+    it was scaled down to fit) and float32[T,3,2] UVs ``tri_uv`` of each triangle corner in [0,1]
+    of its page (NaN for triangles left out)."""
 
-    size: tuple
-    density: float
+    sizes: list
+    page: list
+    density: list
     tri_uv: list
 
 
@@ -68,13 +76,10 @@ def _clean(mesh: ChartMesh):
     return keep, p[used].astype(np.float32), inverse.reshape(-1, 3).astype(np.uint32)
 
 
-def _cache_key(cleaned, density: float, max_size: int, padding: int) -> str:
+def _key(*parts) -> str:
     h = hashlib.sha256(_CACHE_VERSION)
-    h.update(np.array([density, max_size, padding], np.float64).tobytes())
-    for _, pos, idx in cleaned:
-        h.update(np.array(pos.shape + idx.shape, np.int64).tobytes())
-        h.update(pos.tobytes())
-        h.update(idx.tobytes())
+    for part in parts:
+        h.update(part.tobytes() if isinstance(part, np.ndarray) else repr(part).encode())
     return h.hexdigest()
 
 
@@ -94,45 +99,81 @@ def _worker_env() -> dict:
     return env
 
 
-def unwrap(groups: list[list[ChartMesh]], density: float, max_size: int, padding: int,
-           python: Optional[str] = None, cache_dir: Optional[Path] = None) -> list[Atlas]:
-    """Lay out each group of meshes in one shared atlas page; returns one Atlas per group.
+def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: bool = True,
+           python: Optional[str] = None, cache_dir: Optional[Path] = None) -> list[Layout]:
+    """Lay out each group of meshes on pages of its own; returns one Layout per group.
 
-    python: interpreter for the worker (default ``sys.executable``; inside Blender the add-on
+    python: interpreter for the workers (default ``sys.executable``; inside Blender the add-on
     passes Blender's Python). Results are cached in ``cache_dir`` (default
-    :func:`default_cache_dir`) keyed by positions, triangles and options, so an unchanged scene
-    skips xatlas. Meshes measured in millimetres are laid out as well as metre-sized ones (the
-    worker rescales them for xatlas). Raises BakeError when a mesh has no triangle with area, when
-    xatlas gives a mesh no chart (one far smaller than the others of its group) or fails.
+    :func:`default_cache_dir`): a mesh's charts by its positions, triangles, density and padding,
+    a group's pages by its charts and options, so an unchanged scene skips xatlas and a changed
+    mesh is cut again alone. Meshes measured in millimetres are laid out as well as metre-sized
+    ones (the worker rescales them for xatlas). Raises BakeError when a mesh has no triangle with
+    area or xatlas fails.
     """
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    cache_dir.mkdir(parents=True, exist_ok=True)
     cleaned = [[_clean(m) for m in group] for group in groups]
     for group, items in zip(groups, cleaned):
         for mesh, (keep, _, _) in zip(group, items):
             if not keep.any():
                 raise BakeError(f"{mesh.name} has no triangle with area: it cannot be lightmapped")
-    atlases: list[Optional[Atlas]] = [None] * len(groups)
-    todo = []
-    for g, items in enumerate(cleaned):
-        path = cache_dir / f"{_cache_key(items, density, max_size, padding)}.npz"
+    chart_keys = [[_key(pos, idx, float(mesh.density), int(padding)) for mesh, (_, pos, idx) in zip(group, items)]
+                  for group, items in zip(groups, cleaned)]
+    jobs = {}
+    for group, items, keys in zip(groups, cleaned, chart_keys):
+        for mesh, (_, pos, idx), key in zip(group, items, keys):
+            jobs[key] = {"pos": pos, "idx": idx, "density": np.array(float(mesh.density))}
+    charts = _cached(cache_dir, "c", jobs, lambda todo: _run("charts", todo, {"padding": np.array(int(padding))},
+                                                             python, cache_dir))
+    packs = {}
+    for keys in chart_keys:
+        packs[_key(*keys, int(max_size), int(padding), bool(many))] = keys
+    options = {"max_size": np.array(int(max_size)), "padding": np.array(int(padding)),
+               "many": np.array(int(bool(many)))}
+    pack_jobs = {key: {f"m{m}_{name}": charts[k][name] for m, k in enumerate(keys)
+                       for name in ("uv", "idx", "chart")} | {"meshes": np.array(len(keys))}
+                 for key, keys in packs.items()}
+    packed = _cached(cache_dir, "p", pack_jobs, lambda todo: _run("pack", todo, options, python, cache_dir,
+                                                                  whole=True))
+    layouts = []
+    for group, items, keys in zip(groups, cleaned, chart_keys):
+        data = packed[_key(*keys, int(max_size), int(padding), bool(many))]
+        sizes = [tuple(int(x) for x in data[f"p{p}_size"]) for p in range(int(data["pages"]))]
+        pages, densities, tri_uv = [], [], []
+        for m, (mesh, (keep, _, _)) in enumerate(zip(group, items)):
+            uv = np.asarray(data[f"m{m}_uv"], np.float32)
+            idx = np.asarray(data[f"m{m}_idx"], np.int64).reshape(-1, 3)
+            out = np.full((keep.shape[0], 3, 2), np.nan, np.float32)
+            out[keep] = uv[idx]
+            if not _uv_areas(out).any():  # xatlas leaves the faces it drops at UV (0, 0)
+                raise BakeError(f"UV unwrapping gave {mesh.name} no chart")
+            pages.append(int(data[f"m{m}_page"]))
+            densities.append(float(mesh.density) * float(data[f"m{m}_scale"]))
+            tri_uv.append(out)
+        layouts.append(Layout(sizes=sizes, page=pages, density=densities, tri_uv=tri_uv))
+    return layouts
+
+
+def _cached(cache_dir: Path, kind: str, jobs: dict, compute) -> dict:
+    """{key: result dict} for ``jobs`` ({key: inputs}): read from ``cache_dir`` where cached, the
+    rest from ``compute({key: inputs}) -> {key: result}`` and stored."""
+    out, todo = {}, {}
+    for key, job in jobs.items():
+        path = cache_dir / f"{kind}-{key}.npz"
         if path.is_file():
             try:
                 with np.load(path) as data:
-                    atlases[g] = _read(data, 0, items)
+                    out[key] = {name: data[name] for name in data.files}
                 continue
             except (OSError, KeyError, ValueError):
-                pass  # a damaged cache entry: unwrap again
-        todo.append((g, path))
+                pass  # a damaged cache entry: compute again
+        todo[key] = job
     if todo:
-        _run_worker([cleaned[g] for g, _ in todo], density, max_size, padding, python, cache_dir,
-                    [p for _, p in todo], atlases, [g for g, _ in todo])
-    for group, atlas in zip(groups, atlases):
-        for mesh, tri_uv in zip(group, atlas.tri_uv):
-            if not _uv_areas(tri_uv).any():  # xatlas leaves the faces it drops at UV (0, 0)
-                raise BakeError(f"UV unwrapping gave {mesh.name} no chart: it is too small next to "
-                                f"the other objects of its lightmap; give it its own (per-object "
-                                f"layout)")
-    return atlases
+        for key, result in compute(todo).items():
+            out[key] = result
+            np.savez(cache_dir / f"{kind}-{key}.npz", **result)
+    return out
 
 
 def _uv_areas(tri_uv: np.ndarray) -> np.ndarray:
@@ -142,46 +183,48 @@ def _uv_areas(tri_uv: np.ndarray) -> np.ndarray:
         return np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0
 
 
-def _run_worker(items, density, max_size, padding, python, cache_dir, paths, atlases, slots):
+def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path, whole: bool = False) -> dict:
+    """Run the worker's ``command`` on ``jobs`` ({key: inputs}) in up to one process per CPU core
+    (each job a mesh, or with ``whole`` a group of meshes packed together); {key: outputs}."""
     python = python or sys.executable
-    payload = {"atlases": np.array(len(items))}
-    for a, group in enumerate(items):
-        payload[f"a{a}_meshes"] = np.array(len(group))
-        payload[f"a{a}_density"] = np.array(float(density))
-        payload[f"a{a}_max_size"] = np.array(int(max_size))
-        payload[f"a{a}_padding"] = np.array(int(padding))
-        for m, (_, pos, idx) in enumerate(group):
-            payload[f"a{a}_m{m}_pos"] = pos
-            payload[f"a{a}_m{m}_idx"] = idx
-    cache_dir.mkdir(parents=True, exist_ok=True)
+    keys = list(jobs)
+    size = [sum(int(v.size) for v in jobs[k].values()) for k in keys]
+    bins = [[] for _ in range(max(1, min(len(keys), os.cpu_count() or 1)))]
+    load = [0] * len(bins)
+    for k in sorted(range(len(keys)), key=lambda i: -size[i]):  # the largest jobs first, evenly
+        b = load.index(min(load))
+        bins[b].append(k)
+        load[b] += size[k]
+    out = {}
     with tempfile.TemporaryDirectory(prefix="rb-xatlas-", dir=cache_dir) as tmp:
-        path_in, path_out = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
-        np.savez(path_in, **payload)
-        try:
-            proc = subprocess.run([python, str(_WORKER), str(path_in), str(path_out)],
-                                  env=_worker_env(), capture_output=True, text=True)
-        except OSError as exc:
-            raise BakeError(f"cannot start the UV unwrapper with {python}: {exc}") from None
-        if proc.returncode != 0 or not path_out.is_file():
-            detail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or [f"exit status {proc.returncode}"]
-            raise BakeError(f"UV unwrapping (xatlas) failed: {detail[0]}")
-        with np.load(path_out) as data:
-            for a, (group, path, slot) in enumerate(zip(items, paths, slots)):
-                atlases[slot] = _read(data, a, group)
-                np.savez(path, **{k.replace(f"a{a}_", "a0_", 1): data[k] for k in data.files
-                                  if k.startswith(f"a{a}_")})
-
-
-def _read(data, a: int, group) -> Atlas:
-    """The Atlas of group ``a`` in the worker's output ``data`` (per-corner UVs of each triangle)."""
-    tri_uv = []
-    for m, (keep, _, _) in enumerate(group):
-        uv = np.asarray(data[f"a{a}_m{m}_uv"], np.float32)
-        idx = np.asarray(data[f"a{a}_m{m}_idx"], np.int64).reshape(-1, 3)
-        if idx.shape[0] != int(keep.sum()):
-            raise ValueError("unwrap result does not match the mesh")
-        out = np.full((keep.shape[0], 3, 2), np.nan, np.float32)
-        out[keep] = uv[idx]
-        tri_uv.append(out)
-    w, h = (int(x) for x in data[f"a{a}_size"])
-    return Atlas(size=(w, h), density=float(data[f"a{a}_density"]), tri_uv=tri_uv)
+        procs = []
+        for b, members in enumerate(bins):
+            if not members:
+                continue
+            path_in, path_out = Path(tmp) / f"in{b}.npz", Path(tmp) / f"out{b}.npz"
+            payload = dict(options)
+            for j, k in enumerate(members):
+                if whole:
+                    payload.update({f"g{j}_{name}": v for name, v in jobs[keys[k]].items()})
+                else:
+                    payload.update({f"m{j}_{name}": v for name, v in jobs[keys[k]].items()})
+            payload["groups" if whole else "meshes"] = np.array(len(members))
+            np.savez(path_in, **payload)
+            try:
+                proc = subprocess.Popen([python, str(_WORKER), command, str(path_in), str(path_out)],
+                                        env=_worker_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                        text=True)
+            except OSError as exc:
+                raise BakeError(f"cannot start the UV unwrapper with {python}: {exc}") from None
+            procs.append((proc, members, path_out))
+        for proc, members, path_out in procs:
+            stdout, stderr = proc.communicate()
+            if proc.returncode != 0 or not path_out.is_file():
+                detail = (stderr or stdout).strip().splitlines()[-1:] or [f"exit status {proc.returncode}"]
+                raise BakeError(f"UV unwrapping (xatlas) failed: {detail[0]}")
+            with np.load(path_out) as data:
+                for j, k in enumerate(members):
+                    prefix = f"g{j}_" if whole else f"m{j}_"
+                    out[keys[k]] = {name[len(prefix):]: data[name] for name in data.files
+                                    if name.startswith(prefix)}
+    return out

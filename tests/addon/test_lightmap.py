@@ -180,3 +180,67 @@ def test_cli_target_lightmap_writes_files_next_to_the_blend_and_packs(empty_scen
     image = bpy.data.images["Lightmap"]
     assert image.packed_file is not None and max(image.size) <= 64
     assert "Lighting" not in bpy.data.objects[GROUND].data.attributes
+
+
+def _crates(scene, count=5):
+    """``count`` 1 m cubes in a row sharing one material, under a point lamp."""
+    mat = bpy.data.materials.new("Crate")
+    for k in range(count):
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=(1.5 * k, 0.0, 0.5))
+        ob = bpy.context.object
+        ob.name = f"Crate{k}"
+        ob.data.materials.append(mat)
+    light = bpy.data.lights.new("Lamp", 'POINT')
+    light.energy = 500.0
+    lamp = bpy.data.objects.new("Lamp", light)
+    lamp.location = (3.0, -2.0, 4.0)
+    scene.collection.objects.link(lamp)
+    return mat
+
+
+def test_an_atlas_of_several_pages_is_one_udim_image_each_object_on_one_tile(empty_scene, tmp_path):
+    mat = _crates(empty_scene)
+    bpy.data.objects["Crate2"].radiosity_baker_texel_density = 10.0  # its own density, panel-set
+    fast_settings(empty_scene, target="lightmap", output=str(tmp_path / "maps"), texel_density=16.0,
+                  max_size=64, padding=2, hookup="node")
+    job = BakeJob(empty_scene.radiosity_baker.to_settings())
+    warnings = job.run_sync(bpy.context)
+    pages = job.result.lightmap.pages
+    tiles = [p.tile for p in pages]
+    assert len(pages) > 1 and tiles == list(range(1001, 1001 + len(pages)))
+    assert sorted(p.name for p in (tmp_path / "maps").iterdir()) == sorted(
+        f"Lightmap.{t}.{ext}" for t in tiles for ext in ("exr", "png"))
+    image = bpy.data.images["Lightmap"]
+    assert image.source == "TILED" and [t.number for t in image.tiles] == tiles
+    assert image.get(IMAGE_TAG) == "Lightmap" and len(bpy.data.images) == 1
+    # one material shows every page: the objects' UVs point into their tiles
+    assert mat.node_tree.nodes[NODE_PREFIX].image == image
+    assert not any("is used by objects on lightmaps" in w for w in warnings)
+    for page in pages:
+        for name in page.objects:
+            uv = _uv(bpy.data.objects[name].data)
+            assert (np.floor(uv[:, 0]) == page.tile - 1001).all() and (uv[:, 1] <= 1.0).all()
+    density = job.result.counts["lightmap"]["density"]
+    assert density["Crate2"] == {"asked": 10.0, "used": 10.0, "note": "as asked"}
+    assert density["Crate0"] == {"asked": 16.0, "used": 16.0, "note": "as asked"}
+    # a rebake reuses the tiles' UVs as they are
+    again = BakeJob(empty_scene.radiosity_baker.to_settings())
+    again.run_sync(bpy.context)
+    assert [p.tile for p in again.result.lightmap.pages] == tiles and again.result.lightmap.uv == {}
+
+
+def test_cli_bakes_a_multi_page_atlas_and_reports_the_density_used(empty_scene, tmp_path):
+    _crates(empty_scene)
+    blend = tmp_path / "in.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    args = ["bake", str(blend), "--method", "direct", "--samples", "1", "--target", "lightmap",
+            "--texel-density", "16", "--max-size", "64", "--padding", "2"]
+    assert cli.main(args + ["--report", str(tmp_path / "many.json")]) == 0
+    report = json.loads((tmp_path / "many.json").read_text())
+    assert len(report["lightmaps"]) > 1 and "Lightmap.1002" in report["lightmaps"]
+    assert {d["note"] for d in report["counts"]["lightmap"]["density"].values()} == {"as asked"}
+    assert cli.main(args + ["--atlas-pages", "one", "--output", str(tmp_path / "one"), "--report",
+                            str(tmp_path / "one.json")]) == 0
+    report = json.loads((tmp_path / "one.json").read_text())
+    assert list(report["lightmaps"]) == ["Lightmap"]
+    assert {d["note"] for d in report["counts"]["lightmap"]["density"].values()} == {"lowered"}

@@ -38,20 +38,11 @@ def _charts(tri_uv: np.ndarray) -> np.ndarray:
         label = new
 
 
-def test_charts_of_two_meshes_share_one_page_without_overlap_and_keep_the_padding(tmp_path):
-    pos, tris = _box()
-    padding = 3
-    atlas, = unwrap([[ChartMesh("box", pos, tris), ChartMesh("box2", pos * 0.5, tris)]],
-                    density=32.0, max_size=512, padding=padding, cache_dir=tmp_path)
-    w, h = atlas.size
-    assert 16 <= max(w, h) <= 512 and atlas.density == 32.0
-    tri_uv = np.concatenate(atlas.tri_uv)
-    assert np.isfinite(tri_uv).all() and tri_uv.min() >= 0.0 and tri_uv.max() <= 1.0
+def _overlap_free(tri_uv: np.ndarray, w: int, h: int, padding: int) -> None:
+    """Texels covered (conservatively) by different charts of one page are more than ``padding``
+    texels apart (Chebyshev distance), so dilating each chart by the padding never reaches another."""
     labels = _charts(tri_uv)
-    assert len(np.unique(labels)) >= 12
     dev = device.select("cpu")
-    # Texels covered (conservatively) by different charts are more than `padding` texels apart
-    # (Chebyshev distance), so dilating each chart by the padding never reaches another.
     owner = np.full((h, w), -1)
     for c in np.unique(labels):
         tx = raster.rasterize(tri_uv[labels == c], w, h, dev)
@@ -64,55 +55,95 @@ def test_charts_of_two_meshes_share_one_page_without_overlap_and_keep_the_paddin
         owner[ys, xs] = c
 
 
-def test_density_is_lowered_until_the_atlas_fits_one_page(tmp_path):
+def test_charts_of_two_meshes_share_one_page_without_overlap_and_keep_the_padding(tmp_path):
+    pos, tris = _box()
+    padding = 3
+    layout, = unwrap([[ChartMesh("box", pos, tris, 32.0), ChartMesh("box2", pos * 0.5, tris, 32.0)]],
+                     max_size=512, padding=padding, cache_dir=tmp_path)
+    (w, h), = layout.sizes
+    assert 16 <= max(w, h) <= 512 and layout.density == [32.0, 32.0] and layout.page == [0, 0]
+    tri_uv = np.concatenate(layout.tri_uv)
+    assert np.isfinite(tri_uv).all() and tri_uv.min() >= 0.0 and tri_uv.max() <= 1.0
+    assert len(np.unique(_charts(tri_uv))) >= 12
+    _overlap_free(tri_uv, w, h, padding)
+
+
+def test_charts_that_do_not_fit_one_page_go_onto_more_each_mesh_whole_at_its_density(tmp_path):
+    pos, tris = _box()
+    meshes = [ChartMesh(f"box{k}", pos * (0.6 + 0.05 * k), tris, 40.0 if k % 2 else 30.0) for k in range(8)]
+    layout, = unwrap([meshes], max_size=128, padding=2, cache_dir=tmp_path)
+    assert len(layout.sizes) > 1 and all(size == (128, 128) for size in layout.sizes)
+    assert layout.density == [m.density for m in meshes]  # as asked, each its own
+    assert sorted(set(layout.page)) == list(range(len(layout.sizes)))
+    for page, (w, h) in enumerate(layout.sizes):
+        on = [uv for uv, k in zip(layout.tri_uv, layout.page) if k == page]
+        tri_uv = np.concatenate(on)
+        assert tri_uv.min() >= 0.0 and tri_uv.max() <= 1.0
+        _overlap_free(tri_uv, w, h, 2)
+        # a page holds what it can: at most the last page is far from full
+        texels = sum(0.5 * np.abs(np.cross(uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0])).sum() for uv in on) * w * h
+        assert page == len(layout.sizes) - 1 or texels > 0.25 * w * h
+
+
+def test_a_mesh_too_large_for_a_page_is_scaled_down_onto_one_alone(tmp_path):
+    pos, tris = _box()
+    layout, = unwrap([[ChartMesh("small", pos * 0.3, tris, 20.0), ChartMesh("huge", pos * 4.0, tris, 20.0)]],
+                     max_size=128, padding=2, cache_dir=tmp_path)
+    assert layout.density[0] == 20.0 and layout.density[1] < 20.0
+    assert all(max(size) <= 128 for size in layout.sizes)
+
+
+def test_one_page_lowers_the_density_until_everything_fits(tmp_path):
     pos, tris = _box(2.0)
-    atlas, = unwrap([[ChartMesh("box", pos, tris)]], density=200.0, max_size=64, padding=2,
-                    cache_dir=tmp_path)
-    assert max(atlas.size) <= 64 and atlas.density < 200.0
+    layout, = unwrap([[ChartMesh("box", pos, tris, 200.0), ChartMesh("box2", pos * 0.5, tris, 200.0)]],
+                     max_size=64, padding=2, many=False, cache_dir=tmp_path)
+    (w, h), = layout.sizes
+    assert max(w, h) <= 64 and layout.page == [0, 0]
+    assert layout.density[0] == layout.density[1] < 200.0
 
 
 def test_nan_and_zero_area_triangles_are_left_out(tmp_path):
     p, _, t = shapes.grid(1.0, 4)
     p = np.concatenate([p, [[np.nan, 0, 0]]]).astype(np.float32)
     t = np.concatenate([t, [[0, 1, len(p) - 1], [0, 0, 1]]]).astype(np.int32)
-    atlas, = unwrap([[ChartMesh("plane", p, t)]], 16.0, 256, 2, cache_dir=tmp_path)
-    ok = np.isfinite(atlas.tri_uv[0]).all(axis=(1, 2))
+    layout, = unwrap([[ChartMesh("plane", p, t, 16.0)]], 256, 2, cache_dir=tmp_path)
+    ok = np.isfinite(layout.tri_uv[0]).all(axis=(1, 2))
     assert ok[:-2].all() and not ok[-2:].any()
 
 
 def test_a_mesh_without_area_is_an_error_naming_it(tmp_path):
     p = np.zeros((3, 3), np.float32)
     with pytest.raises(BakeError, match="Flat"):
-        unwrap([[ChartMesh("Flat", p, np.array([[0, 1, 2]], np.int32))]], 16.0, 256, 2, cache_dir=tmp_path)
+        unwrap([[ChartMesh("Flat", p, np.array([[0, 1, 2]], np.int32), 16.0)]], 256, 2, cache_dir=tmp_path)
 
 
 @pytest.mark.parametrize("density", [20.0, 1000.0, 1e5])
 def test_millimetre_meshes_get_charts_and_texels_at_any_density(tmp_path, density):
     pos, tris = _box(0.002)  # 2 mm: xatlas alone drops every face of it
-    atlas, = unwrap([[ChartMesh("screw", pos, tris), ChartMesh("nut", pos * 0.5 + 0.01, tris)]],
-                    density, 1024, 2, cache_dir=tmp_path)
-    w, h = atlas.size
-    assert w > 0 and h > 0 and atlas.density == density
+    layout, = unwrap([[ChartMesh("screw", pos, tris, density), ChartMesh("nut", pos * 0.5 + 0.01, tris, density)]],
+                     1024, 2, cache_dir=tmp_path)
     dev = device.select("cpu")
-    for tri_uv in atlas.tri_uv:
+    for tri_uv, page in zip(layout.tri_uv, layout.page):
+        w, h = layout.sizes[page]
         assert np.isfinite(tri_uv).all() and tri_uv.min() >= 0.0 and tri_uv.max() <= 1.0
         assert raster.rasterize(tri_uv, w, h, dev).count > 0
 
 
-def test_a_mesh_too_small_beside_the_others_of_its_page_is_an_error_naming_it(tmp_path):
+def test_a_mesh_far_smaller_than_the_others_of_its_page_still_gets_texels(tmp_path):
     pos, tris = _box()
-    with pytest.raises(BakeError, match="gave Speck no chart"):
-        unwrap([[ChartMesh("box", pos, tris), ChartMesh("box2", pos + 3, tris),
-                 ChartMesh("Speck", pos * 1e-4, tris)]], 16.0, 256, 2, cache_dir=tmp_path)
+    layout, = unwrap([[ChartMesh("box", pos, tris, 16.0), ChartMesh("box2", pos + 3, tris, 16.0),
+                       ChartMesh("Speck", pos * 1e-4, tris, 16.0)]], 256, 2, cache_dir=tmp_path)
+    w, h = layout.sizes[layout.page[2]]
+    assert raster.rasterize(layout.tri_uv[2], w, h, device.select("cpu")).count > 0
 
 
 def test_results_are_cached_per_mesh_content(tmp_path):
     pos, tris = _box()
-    first, = unwrap([[ChartMesh("box", pos, tris)]], 16.0, 256, 2, cache_dir=tmp_path)
+    first, = unwrap([[ChartMesh("box", pos, tris, 16.0)]], 256, 2, cache_dir=tmp_path)
     # A cache hit never starts the worker: a missing interpreter does not matter then.
-    again, = unwrap([[ChartMesh("box", pos, tris)]], 16.0, 256, 2, python="/nonexistent/python",
+    again, = unwrap([[ChartMesh("box", pos, tris, 16.0)]], 256, 2, python="/nonexistent/python",
                     cache_dir=tmp_path)
     np.testing.assert_array_equal(first.tri_uv[0], again.tri_uv[0])
     with pytest.raises(BakeError, match="cannot start the UV unwrapper"):
-        unwrap([[ChartMesh("box", pos * 1.01, tris)]], 16.0, 256, 2, python="/nonexistent/python",
+        unwrap([[ChartMesh("box", pos * 1.01, tris, 16.0)]], 256, 2, python="/nonexistent/python",
                cache_dir=tmp_path)
