@@ -77,7 +77,8 @@ def object_density(ob):
     where the add-on keeps it, also when the add-on is not registered (the bpy-module command line)."""
     value = getattr(ob, DENSITY_PROP, None)
     if value is None:
-        value = ob.bl_system_properties_get().get(DENSITY_PROP)
+        stored = ob.bl_system_properties_get()  # None when the object holds no such property
+        value = stored.get(DENSITY_PROP) if stored is not None else None
     return float(value) if value else None
 
 
