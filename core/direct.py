@@ -26,6 +26,8 @@ ELLIPSE_SIDES = wp.constant(32)
 # An ellipse lamp's outline is a regular polygon whose radii are scaled by this so that its area
 # equals the ellipse's.
 ELLIPSE_SCALE = wp.constant(1.0 / math.sqrt(32 / (2.0 * PI) * math.sin(2.0 * PI / 32)))
+# A shadowed estimate's noise is measured against at least this fraction of its unshadowed light.
+NOISE_FLOOR = wp.constant(0.05)
 # The stack entry that stands for every leaf at once (``exact``).
 ALL_LEAVES = wp.constant(-2)
 BUCKET = wp.constant(lighttree.BUCKET)
@@ -406,15 +408,21 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     emitters, the shadow the kernel-weighted visible fraction as for a single lamp. ``shadows`` 0
     leaves shadows out (every sample visible, no rays). ``exact`` 1 weighs every emitter by its
     exact unoccluded lighting, as one bucket: each emitter's share of the samples is then its share
-    of the light. lit / dark: 1 if some emitter's shadow was above 0 / below 1.
+    of the light. lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
+    estimate's standard error from the spread of its samples, relative to it (or to NOISE_FLOOR of
+    its unshadowed light where it is darker than that); 0 unshadowed.
     """
     t = g.tree
     value = wp.vec3(0.0)
     rays = int(0)
     lit = int(0)
     dark = int(0)
+    # Σ x, Σ x² and Σ x unshadowed (luminance) of the samples' contributions x, for the noise
+    sx = float(0.0)
+    sxx = float(0.0)
+    su = float(0.0)
     if t.root < 0:
-        return value, rays, lit, dark
+        return value, rays, lit, dark, 0.0
     r = wp.float64(wp.randf(wp.rand_init(seed, -1)))
     nodes = stack_int()
     los = stack_f64()
@@ -520,8 +528,17 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
                     dark = 1
                 if shadow > 0.0:
                     value += tj * (shadow * float(e1 - e0) / (asked * float(l1 - l0)))
+                # each sample adds x = T/p where seen: Σx² ≈ (T/p)² × shadow × samples
+                x = (tj[0] + tj[1] + tj[2]) / float(l1 - l0)
+                sx += x * shadow * float(e1 - e0)
+                sxx += x * x * shadow * float(e1 - e0)
+                su += x * float(e1 - e0)
             l0 = l1
-    return value, rays, lit, dark
+    noise = float(0.0)
+    if asked > 1.0 and su > 0.0:
+        error = wp.sqrt(wp.max(sxx - sx * sx / asked, 0.0) / (asked * (asked - 1.0)))
+        noise = error / wp.max(sx / asked, NOISE_FLOOR * su / asked)
+    return value, rays, lit, dark, noise
 
 
 # Modes of the direct-light kernel per receiver.
@@ -534,16 +551,19 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
                    mode: wp.array(dtype=wp.int32), count: int, tile: wp.array(dtype=wp.int32),
                    tile_index: wp.array(dtype=wp.int32), tile_count: wp.array(dtype=wp.int32),
                    seed: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
-                   rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32)):
+                   rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
+                   noise: wp.array(dtype=wp.float32)):
     """Per receiver by ``mode``: FULL ``count`` shadowed samples; UNSHADOWED the same without
     shadows; PROBE one sample, the receiver's own of its tile's stratified set (tile_index of
-    tile_count, seeded per tile); SKIP nothing (0). flags: 1 lit, 2 dark, 3 both (see _estimate)."""
+    tile_count, seeded per tile); SKIP nothing (0). flags: 1 lit, 2 dark, 3 both; noise: relative
+    standard error (see _estimate)."""
     i = wp.tid() + offset
     md = mode[i]
     if md == MODE_SKIP:
         out[i] = wp.vec3(0.0)
         rays[i] = 0
         flags[i] = 0
+        noise[i] = 0.0
         return
     p = points[i]
     n = normals[i]
@@ -560,10 +580,11 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
     shadows = int(1)
     if md == MODE_UNSHADOWED:
         shadows = 0
-    value, nr, lit, dark = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows, exact, far)
+    value, nr, lit, dark, err = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows, exact, far)
     out[i] = value
     rays[i] = nr
     flags[i] = lit + 2 * dark
+    noise[i] = err
 
 
 def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray, mode: np.ndarray,
@@ -574,7 +595,8 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     size (m) for the ray offset; mode: int32[N] MODE_* per receiver; count: samples of the FULL and
     UNSHADOWED modes; seed: of the sample jitter; tiles: for MODE_PROBE, (tile int[N], the
     receiver's index in its tile int[N], receivers in its tile int[N]). Returns (float32[N,3]
-    lighting, int64[N] rays, int32[N] flags: 1 some emitter was seen, 2 some was shadowed, 3 both).
+    lighting, int64[N] rays, int32[N] flags: 1 some emitter was seen, 2 some was shadowed, 3 both;
+    float32[N] noise: each estimate's standard error relative to it, see ``_estimate``).
     """
     dev = problem.device
     d = dev.name
@@ -582,6 +604,7 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     out = wp.zeros(n, dtype=wp.vec3, device=d)
     rays = wp.zeros(n, dtype=wp.int32, device=d)
     flags = wp.zeros(n, dtype=wp.int32, device=d)
+    noise = wp.zeros(n, dtype=wp.float32, device=d)
     if tiles is None:
         tiles = (np.zeros(1, np.int32),) * 3
     tile_arrays = [wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=d) for a in tiles]
@@ -592,9 +615,10 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
          wp.array(unit(normals), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
          wp.array(np.ascontiguousarray(mode, np.int32), dtype=wp.int32, device=d), int(count),
-         *tile_arrays, int(seed), int(exact_selection(problem, n)), problem.far, out, rays, flags],
+         *tile_arrays, int(seed), int(exact_selection(problem, n)), problem.far, out, rays, flags,
+         noise],
         dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
-    return out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy()
+    return out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy(), noise.numpy()
 
 
 def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,
@@ -607,7 +631,7 @@ def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.
     irradiance/π, number of shadow rays traced).
     """
     n = int(points.shape[0])
-    out, rays, _ = estimate(problem, points, normals, sizes, np.full(n, MODE_FULL, np.int32),
+    out, rays, _, _ = estimate(problem, points, normals, sizes, np.full(n, MODE_FULL, np.int32),
                             problem.settings.light_samples, problem.settings.seed, progress=progress)
     return out, int(rays.sum())
 

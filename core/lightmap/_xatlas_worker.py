@@ -4,18 +4,20 @@ xatlas holds the GIL for its whole run and can crash on bad input, so it never r
 process. This script imports nothing of the package (nor bpy): only numpy and xatlas.
 
 ``charts``: IN holds ``meshes`` (count) and per mesh ``m{m}_pos`` float32[N,3] (metres),
-``m{m}_idx`` uint32[M,3], ``m{m}_density`` (texels per metre), and ``padding`` (texels). Each mesh
-is cut into charts and laid out alone; OUT holds per mesh ``m{m}_uv`` float32[K,2] (texels),
-``m{m}_idx`` uint32[M,3] (the triangles over those UV vertices, in the input's order) and
-``m{m}_chart`` int32[K] (the chart of each UV vertex).
+``m{m}_idx`` uint32[M,3], ``m{m}_density`` (texels per metre), and ``padding``, ``max_size``
+(texels). Each mesh is cut into charts and laid out alone, at most at the density whose charts'
+area fills a page (a far too high one makes xatlas build enormous charts first); OUT holds per mesh
+``m{m}_uv`` float32[K,2] (texels), ``m{m}_idx`` uint32[M,3] (the triangles over those UV
+vertices, in the input's order), ``m{m}_chart`` int32[K] (the chart of each UV vertex) and
+``m{m}_density`` (the density laid out at).
 
 ``pack``: IN holds ``max_size``, ``padding``, ``many`` (1: as many pages as needed, each mesh
 whole on one; 0: one page, everything scaled down until it fits) and ``groups``, each packed by
 itself, its names prefixed ``g{g}_``: ``meshes`` and per mesh ``m{m}_uv``, ``m{m}_idx``,
-``m{m}_chart`` (as ``charts`` gave them, texels). OUT holds per group (prefixed alike) ``pages``,
-``p{p}_size`` (width, height) and per mesh ``m{m}_page``, ``m{m}_scale`` (1, or less where the mesh
-was scaled down to fit), ``m{m}_uv`` float32[K,2] in [0,1] of its page and ``m{m}_idx``
-uint32[M,3].
+``m{m}_chart``, ``m{m}_density`` (as ``charts`` gave them, texels). OUT holds per group (prefixed
+alike) ``pages``, ``p{p}_size`` (width, height) and per mesh ``m{m}_page``, ``m{m}_scale`` (of its
+charts: 1, or less where it was scaled down to fit), ``m{m}_uv`` float32[K,2] in [0,1] of its
+page and ``m{m}_idx`` uint32[M,3].
 """
 import sys
 
@@ -61,19 +63,22 @@ def _scale(areas: np.ndarray) -> float:
 
 def charts(data) -> dict:
     out = {}
-    padding = int(data["padding"])
+    padding, max_size = int(data["padding"]), int(data["max_size"])
     for m in range(int(data["meshes"])):
         pos = np.ascontiguousarray(data[f"m{m}_pos"], np.float32)
         idx = np.ascontiguousarray(data[f"m{m}_idx"], np.uint32)
-        scale = _scale(_areas(pos, idx))
+        areas = _areas(pos, idx)
+        scale = _scale(areas)
+        density = min(float(data[f"m{m}_density"]), max_size / max(float(areas.sum()), 1e-30) ** 0.5)
         atlas = xatlas.Atlas()
         atlas.add_mesh(pos * np.float32(scale), idx)
-        atlas.generate(xatlas.ChartOptions(), _pack_options(0, float(data[f"m{m}_density"]) / scale, padding))
+        atlas.generate(xatlas.ChartOptions(), _pack_options(0, density / scale, padding))
         _, tri, uv = atlas[0]
         _, chart = atlas.get_mesh_vertex_assignment(0)
         out[f"m{m}_uv"] = (uv * np.array([atlas.width, atlas.height], np.float64)).astype(np.float32)
         out[f"m{m}_idx"] = tri
         out[f"m{m}_chart"] = chart.astype(np.int32)
+        out[f"m{m}_density"] = np.array(density)
     return out
 
 
@@ -114,21 +119,24 @@ def _fits_alone(mesh, max_size: int, padding: int) -> float:
 
 def pack(data) -> dict:
     max_size, padding, many = int(data["max_size"]), int(data["padding"]), bool(int(data["many"]))
+    count = int(data["meshes"])
     meshes = [(np.asarray(data[f"m{m}_uv"], np.float32), np.ascontiguousarray(data[f"m{m}_idx"], np.uint32),
-               np.asarray(data[f"m{m}_chart"], np.int64)) for m in range(int(data["meshes"]))]
+               np.asarray(data[f"m{m}_chart"], np.int64)) for m in range(count)]
     out = {}
-    if not many:
+    if not many:  # one density for all: each mesh's charts scaled to the lowest first
+        density = [float(data[f"m{m}_density"]) for m in range(count)]
+        base = [min(density) / d for d in density]
         s = 1.0
         for _ in range(MAX_TRIES):
-            atlas = _layout(meshes, [s] * len(meshes), 0, padding)
+            atlas = _layout(meshes, [s * b for b in base], 0, padding)
             longest = max(atlas.width, atlas.height)
             if atlas.atlas_count <= 1 and longest <= max_size:
                 break
             s *= SHRINK_MARGIN * max_size / max(longest, max_size + 1)
         else:
             raise RuntimeError(f"xatlas: no single page of {max_size} texels found")
-        pages = [(list(range(len(meshes))), atlas)]
-        scales = [s] * len(meshes)
+        pages = [(list(range(count)), atlas)]
+        scales = [s * b for b in base]
     else:
         scales = [_fits_alone(mesh, max_size, padding) for mesh in meshes]
         atlas = _layout(meshes, scales, 0, padding)

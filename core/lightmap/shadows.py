@@ -8,8 +8,9 @@ The schedule works on each page's (supersampled) texel grid:
    is lit: its texels get the unoccluded light of ``light_samples`` emitter samples, without rays.
    All shadowed, with the tiles around: dark (0). Every other texel (near a shadow edge, in a
    penumbra, where a probe found no light) traces ``light_samples`` rays.
-3. Texels whose own rays disagreed (some emitter seen, some shadowed) and the texels next to them
-   trace up to ``shadow_budget`` rays in all, both estimates averaged by their sample counts.
+3. Texels whose estimate is noisy (its standard error, from the spread of its samples, above
+   NOISE of it: a penumbra, lights both seen and hidden) and the texels next to them trace up to
+   ``shadow_budget`` rays in all, both estimates averaged by their sample counts.
 
 What it can miss: a shadow too faint for a whole neighbourhood of probes (3 × 3 tiles, 144 rays)
 to see, covering a fraction f of the light everywhere there, with probability about (1 − f)^144.
@@ -24,6 +25,8 @@ from .. import direct
 
 # Side of a tile in texels of the supersampled grid.
 TILE = 4
+# A texel whose first estimate's relative standard error exceeds this traces up to the budget.
+NOISE = 0.05
 # Tile classes.
 _EMPTY, _LIT, _DARK, _MIXED = 0, 1, 2, 3
 
@@ -77,7 +80,7 @@ def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, 
     per_tile = np.bincount(tile, minlength=base)
     index = np.empty(n, np.int64)
     index[order] = np.arange(n) - np.repeat(np.cumsum(per_tile) - per_tile, per_tile)
-    _, probe_rays, flags = direct.estimate(problem, points, normals, sizes,
+    _, probe_rays, flags, _ = direct.estimate(problem, points, normals, sizes,
                                            np.full(n, direct.MODE_PROBE, np.int32), 1, settings.seed,
                                            (tile, index, per_tile[tile]),
                                            progress=lambda f: report(0.2 * f))
@@ -87,19 +90,19 @@ def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, 
         mode[rows] = np.where(cls == _LIT, direct.MODE_UNSHADOWED,
                               np.where(cls == _DARK, direct.MODE_SKIP, direct.MODE_FULL))
     samples = settings.light_samples
-    out, rays, flags = direct.estimate(problem, points, normals, sizes, mode, samples, settings.seed,
+    out, rays, flags, noise = direct.estimate(problem, points, normals, sizes, mode, samples, settings.seed,
                                        progress=lambda f: report(0.2 + 0.5 * f))
     more = settings.shadow_budget - samples
     penumbra = np.zeros(n, bool)
     for texels, _, _, rows in grids:
         grid = np.zeros(texels.width * texels.height, bool)
-        grid[texels.index] = flags[rows] == 3
+        grid[texels.index] = noise[rows] > NOISE
         grown = np.zeros_like(grid.reshape(texels.height, texels.width))
         for near in _around(grid.reshape(texels.height, texels.width)):
             grown |= near
         penumbra[rows] = grown.ravel()[texels.index] & (mode[rows] == direct.MODE_FULL)
     if more > 0 and penumbra.any():
-        extra, extra_rays, _ = direct.estimate(problem, points, normals, sizes,
+        extra, extra_rays, _, _ = direct.estimate(problem, points, normals, sizes,
                                                np.where(penumbra, direct.MODE_FULL, direct.MODE_SKIP),
                                                more, settings.seed + 1,
                                                progress=lambda f: report(0.7 + 0.3 * f))

@@ -26,7 +26,7 @@ from ..errors import BakeError
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
-_CACHE_VERSION = b"rb-unwrap-4"
+_CACHE_VERSION = b"rb-unwrap-5"
 
 
 @dataclass
@@ -118,21 +118,22 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
         for mesh, (keep, _, _) in zip(group, items):
             if not keep.any():
                 raise BakeError(f"{mesh.name} has no triangle with area: it cannot be lightmapped")
-    chart_keys = [[_key(pos, idx, float(mesh.density), int(padding)) for mesh, (_, pos, idx) in zip(group, items)]
-                  for group, items in zip(groups, cleaned)]
+    chart_keys = [[_key(pos, idx, float(mesh.density), int(padding), int(max_size))
+                   for mesh, (_, pos, idx) in zip(group, items)] for group, items in zip(groups, cleaned)]
     jobs = {}
     for group, items, keys in zip(groups, cleaned, chart_keys):
         for mesh, (_, pos, idx), key in zip(group, items, keys):
             jobs[key] = {"pos": pos, "idx": idx, "density": np.array(float(mesh.density))}
-    charts = _cached(cache_dir, "c", jobs, lambda todo: _run("charts", todo, {"padding": np.array(int(padding))},
-                                                             python, cache_dir))
+    charts = _cached(cache_dir, "c", jobs, lambda todo: _run(
+        "charts", todo, {"padding": np.array(int(padding)), "max_size": np.array(int(max_size))}, python,
+        cache_dir))
     packs = {}
     for keys in chart_keys:
         packs[_key(*keys, int(max_size), int(padding), bool(many))] = keys
     options = {"max_size": np.array(int(max_size)), "padding": np.array(int(padding)),
                "many": np.array(int(bool(many)))}
     pack_jobs = {key: {f"m{m}_{name}": charts[k][name] for m, k in enumerate(keys)
-                       for name in ("uv", "idx", "chart")} | {"meshes": np.array(len(keys))}
+                       for name in ("uv", "idx", "chart", "density")} | {"meshes": np.array(len(keys))}
                  for key, keys in packs.items()}
     packed = _cached(cache_dir, "p", pack_jobs, lambda todo: _run("pack", todo, options, python, cache_dir,
                                                                   whole=True))
@@ -149,7 +150,7 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
             if not _uv_areas(out).any():  # xatlas leaves the faces it drops at UV (0, 0)
                 raise BakeError(f"UV unwrapping gave {mesh.name} no chart")
             pages.append(int(data[f"m{m}_page"]))
-            densities.append(float(mesh.density) * float(data[f"m{m}_scale"]))
+            densities.append(float(charts[keys[m]]["density"]) * float(data[f"m{m}_scale"]))
             tri_uv.append(out)
         layouts.append(Layout(sizes=sizes, page=pages, density=densities, tri_uv=tri_uv))
     return layouts
