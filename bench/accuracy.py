@@ -13,6 +13,8 @@ sample count and at a high sample count taken as the truth:
   error, mean bias, 95th-percentile absolute error (core.metrics.scalar_summary); the speedup is
   measured on the mean absolute error.
 
+With ``--lightmap`` (issue #13) it compares lightmaps instead: see :func:`run_lightmap`.
+
 Every bake is timed (wall clock, extraction included for ours, scene sync included for Cycles).
 The equal-error speedup is the time Cycles needs to reach our error — interpolated on its log
 error / log time curve, or extrapolated along its last segment when our error lies outside the
@@ -33,7 +35,7 @@ import bpy
 import numpy as np
 
 from radiosity_baker.addon.compare import bake_vertex_values, stack
-from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
+from radiosity_baker.addon.cycles_ref import cycles_bake_image, cycles_bake_vertex_colors
 from radiosity_baker.core import Settings, metrics
 from radiosity_baker.core import settings as core_settings
 from radiosity_baker.core.solvers import SOLVERS
@@ -41,6 +43,7 @@ from radiosity_baker.core.solvers import SOLVERS
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "addon"))
 from test_reference_vs_cycles import receivers  # noqa: E402  (the same receiver choice as the test)
+from test_lightmap_vs_cycles import _next_to_a_jump  # noqa: E402  (the same texels left out)
 
 
 # What each quantity is baked as in Cycles, how errors are summarised, and which summary entry the
@@ -185,6 +188,213 @@ def _panel(ax, scene, quantity, r, reference_samples) -> None:
     ax.legend(fontsize=8)
 
 
+def _oidn():
+    """The pyoidn module, or None where it is not installed."""
+    try:
+        import pyoidn
+    except ImportError:
+        return None
+    return pyoidn
+
+
+def _denoised(pyoidn, image: np.ndarray) -> tuple:
+    """(float32[H,W,3] RGB, seconds) of a Cycles image bake (float32[H,W,4], alpha = baked)
+    denoised by OIDN's lightmap filter after its charts were dilated into the gutter (a bake
+    margin of DENOISE_MARGIN texels), as lightmappers that bake with Cycles do."""
+    from radiosity_baker.core.lightmap.pages import dilate
+
+    t0 = time.perf_counter()
+    rgb = dilate(image[..., :3], image[..., 3] > 0.5, DENOISE_MARGIN)
+    out = pyoidn.denoise(np.ascontiguousarray(rgb, np.float32), filter_type="RTLightmap")
+    return out, time.perf_counter() - t0
+
+
+DENOISE_MARGIN = 16
+
+
+def _lightmap_mask(page, reference: np.ndarray) -> np.ndarray:
+    """The texels compared, as tests/addon/test_lightmap_vs_cycles.py chooses them: baked by both,
+    not next to the light's outline (a jump of the lighting inside a texel), not hidden (0 in
+    Cycles)."""
+    baked = page.covered & (reference[..., 3] > 0.5)
+    return baked & ~_next_to_a_jump(page.rgb, page.covered) & (reference[..., :3].max(axis=2) > 0.0)
+
+
+def _rel(squared: float, mean: float) -> float:
+    """Relative RMSE from a mean squared RGB error (clamped at 0) and the truth's mean norm."""
+    return float(np.sqrt(max(squared, 0.0)) / mean)
+
+
+def _ms(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
+    return float(((a[mask] - b[mask]) ** 2).sum(axis=1).mean())
+
+
+def _our_lightmap(names, size: int, output: Path):
+    """Our lightmap of ``names`` on one page of ``size`` (the reference solver, the defaults
+    otherwise), baked through the add-on so the ``Lightmap`` UVs Cycles bakes through are written:
+    (page, wall seconds from extraction to written files, timings)."""
+    from radiosity_baker.addon.job import BakeJob
+
+    settings = Settings(method="reference", target="lightmap", max_size=size, texel_density=1e4,
+                        padding=2, supersample=2, atlas_pages="one", reunwrap=True, output=str(output))
+    t0 = time.perf_counter()
+    job = BakeJob(settings, names)
+    job.run_sync(bpy.context)
+    return job.result.lightmap.pages[0], time.perf_counter() - t0, job.timings
+
+
+def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes, pair_samples,
+                 extrapolated_sizes, output: Path) -> dict:
+    """Lightmaps of ``scene_name`` against Cycles' image bake through the same UVs.
+
+    At ``truth_size``: our page, Cycles at each of ``samples`` and a ``reference_samples`` truth;
+    each Cycles bake also denoised (OIDN ``RTLightmap``, where pyoidn is installed). At each of
+    ``pair_sizes`` (too many texels for a truth): two Cycles bakes of different seeds at each of
+    ``pair_samples``; their difference measures Cycles' own noise σ² (half its mean square), so
+    errors against the truth follow from errors against a noisy bake: Cycles' is its noise, ours
+    is mean|ours − mean of the pair|² − σ²/2, a denoised bake's mean|D(first) − second|² − σ² of
+    the second (the highest sample count). At ``extrapolated_sizes``: our page timed and one Cycles
+    bake at the lowest of ``pair_samples`` timed; errors per sample count taken from the largest
+    pair size (noise per texel does not depend on the page size), Cycles' and OIDN's times scaled
+    from there by texels × samples and texels (marked extrapolated). Equal-error speedups as for
+    vertices, against raw Cycles and against Cycles + OIDN.
+    """
+    pyoidn = _oidn()
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / f"{scene_name}.blend"))
+    names = sorted(o.name for o in bpy.context.scene.objects if o.type == "MESH" and o.name != "Light")
+    out = {"objects": names, "denoiser": "OIDN RTLightmap (pyoidn)" if pyoidn else None,
+           "denoiser_note": None if pyoidn else "pyoidn is not installed: no denoised curve", "sizes": {}}
+    for size in [truth_size, *pair_sizes, *extrapolated_sizes]:
+        page, seconds, timings = _our_lightmap(names, size, output / f"ours-{size}")
+        w, h = page.size
+        row = {"size": [w, h], "texels": int(page.covered.sum()), "ours_seconds": round(seconds, 3),
+               "ours_stages": {k: round(v, 3) for k, v in timings.items()}}
+        print(f"  lightmap {size}: ours {w}x{h} in {seconds:.1f} s", flush=True)
+        bake = {}
+
+        def cycles(s, seed):
+            t0 = time.perf_counter()
+            image = cycles_bake_image(names, "Lightmap", w, h, samples=s, seed=seed)
+            bake[(s, seed)] = (image, time.perf_counter() - t0)
+            print(f"  lightmap {size}: cycles {s} spp seed {seed}: {bake[(s, seed)][1]:.1f} s", flush=True)
+            return bake[(s, seed)]
+
+        if size == truth_size:
+            truth, _ = cycles(reference_samples, 7)
+            mask = _lightmap_mask(page, truth)
+            mean = float(np.linalg.norm(truth[..., :3][mask], axis=1).mean())
+            curve = []
+            for s in samples:
+                image, t = cycles(s, s)
+                entry = {"samples": s, "seconds": round(t, 3),
+                         "relative_rmse": round(_rel(_ms(image[..., :3], truth[..., :3], mask), mean), 5)}
+                if pyoidn:
+                    d, td = _denoised(pyoidn, image)
+                    entry.update(denoise_seconds=round(td, 3),
+                                 denoised_relative_rmse=round(_rel(_ms(d, truth[..., :3], mask), mean), 5))
+                curve.append(entry)
+            ours = _rel(_ms(page.rgb, truth[..., :3], mask), mean)
+            row.update(truth_samples=reference_samples, texels_compared=int(mask.sum()))
+        elif size in pair_sizes:
+            top = max(pair_samples)
+            (a_top, _), (b_top, _) = cycles(top, 1), cycles(top, 2)
+            mask = _lightmap_mask(page, a_top) & (b_top[..., 3] > 0.5)
+            mean = float(np.linalg.norm(0.5 * (a_top + b_top)[..., :3][mask], axis=1).mean())
+            sigma_top = 0.5 * _ms(a_top[..., :3], b_top[..., :3], mask)
+            curve = []
+            for s in sorted(pair_samples):
+                (a, ta), (b, _) = (bake[(s, 1)], bake[(s, 2)]) if s == top else (cycles(s, 1), cycles(s, 2))
+                entry = {"samples": s, "seconds": round(ta, 3),
+                         "relative_rmse": round(_rel(0.5 * _ms(a[..., :3], b[..., :3], mask), mean), 5)}
+                if pyoidn:
+                    d, td = _denoised(pyoidn, a)
+                    entry.update(denoise_seconds=round(td, 3), denoised_relative_rmse=round(
+                        _rel(_ms(d, b_top[..., :3], mask) - sigma_top, mean), 5))
+                curve.append(entry)
+            ours = _rel(_ms(page.rgb, 0.5 * (a_top + b_top)[..., :3], mask) - 0.5 * sigma_top, mean)
+            row.update(pair_samples=sorted(pair_samples), texels_compared=int(mask.sum()),
+                       cycles_noise_measured_from="pairs of bakes")
+        else:  # extrapolated from the largest pair size
+            base = out["sizes"][str(max(pair_sizes))]
+            low = min(pair_samples)
+            _, t_low = cycles(low, 1)
+            scale = t_low / next(c["seconds"] for c in base["cycles"] if c["samples"] == low)
+            texel_scale = row["texels"] / base["texels"]
+            curve = [{"samples": c["samples"], "seconds": round(c["seconds"] * scale, 3),
+                      "relative_rmse": c["relative_rmse"],
+                      **({"denoise_seconds": round(c["denoise_seconds"] * texel_scale, 3),
+                          "denoised_relative_rmse": c["denoised_relative_rmse"]} if pyoidn else {})}
+                     for c in base["cycles"]]
+            ours = base["ours_relative_rmse"]
+            row.update(extrapolated=True, cycles_seconds_measured={low: round(t_low, 3)},
+                       note=f"Cycles measured at {low} spp only; errors from the {max(pair_sizes)} page")
+        row["cycles"] = curve
+        row["ours_relative_rmse"] = round(ours, 5)
+        for label, key, extra in (("cycles", "relative_rmse", None), ("cycles_oidn", "denoised_relative_rmse",
+                                                                       "denoise_seconds")):
+            if key not in curve[0]:
+                continue
+            t, extrapolated = equal_error_seconds([c[key] for c in curve],
+                                                  [c["seconds"] + (c[extra] if extra else 0.0) for c in curve],
+                                                  max(ours, 1e-6))
+            row[f"{label}_seconds_at_equal_error"] = round(t, 3)
+            row[f"speedup_vs_{label}"] = round(t / seconds, 2)
+            row[f"{label}_extrapolated"] = extrapolated
+        print(f"  lightmap {size}: ours RMSE {ours:.4f}; {json.dumps({k: v for k, v in row.items() if 'speedup' in k})}",
+              flush=True)
+        out["sizes"][str(size)] = row
+    return out
+
+
+def lightmap_markdown(results) -> str:
+    """One table: per page size, Cycles' rows (raw and denoised) and ours with both speedups."""
+    lines = ["| page | bake | time (s) | rel. RMSE | denoised time (s) | denoised rel. RMSE |",
+             "| --- | --- | ---: | ---: | ---: | ---: |"]
+    for size, r in results["lightmap"]["sizes"].items():
+        mark = "*" if r.get("extrapolated") else ""
+        w, h = r["size"]
+        for c in r["cycles"]:
+            den = (f"{c['seconds'] + c['denoise_seconds']:.1f}{mark} | {c['denoised_relative_rmse']:.4f}"
+                   if "denoised_relative_rmse" in c else " | ")
+            lines.append(f"| {w}×{h} | Cycles {c['samples']} spp | {c['seconds']:.1f}{mark} | "
+                         f"{c['relative_rmse']:.4f} | {den} |")
+        speed = "; ".join(f"{r[f'speedup_vs_{k}']:.1f}×{'*' if r[f'{k}_extrapolated'] else ''} vs {label}"
+                          for k, label in (("cycles", "Cycles"), ("cycles_oidn", "Cycles + OIDN"))
+                          if f"speedup_vs_{k}" in r)
+        lines.append(f"| {w}×{h} | **ours** (reference, {r['texels']} texels) | {r['ours_seconds']:.1f} | "
+                     f"{r['ours_relative_rmse']:.4f} | {speed} | |")
+    return "\n".join(lines)
+
+
+def lightmap_plot(results, path: Path) -> None:
+    """Error against time per page size: Cycles raw and denoised as lines, ours as a mark."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    sizes = results["lightmap"]["sizes"]
+    fig, axes = plt.subplots(1, len(sizes), figsize=(6 * len(sizes), 4.5), squeeze=False)
+    for ax, (size, r) in zip(axes[0], sizes.items()):
+        c = r["cycles"]
+        ax.plot([x["seconds"] for x in c], [x["relative_rmse"] for x in c], "k-o", label="Cycles")
+        if "denoised_relative_rmse" in c[0]:
+            ax.plot([x["seconds"] + x["denoise_seconds"] for x in c], [x["denoised_relative_rmse"] for x in c],
+                    "b-o", label="Cycles + OIDN")
+        for x in c:
+            ax.annotate(str(x["samples"]), (x["seconds"], x["relative_rmse"]), textcoords="offset points",
+                        xytext=(4, 4), fontsize=8)
+        ax.plot([r["ours_seconds"]], [max(r["ours_relative_rmse"], 1e-4)], "rs", markersize=9, label="ours")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("wall time (s)")
+        ax.set_ylabel("relative RMSE")
+        ax.set_title(f"{results['lightmap']['scene']} lightmap {r['size'][0]}×{r['size'][1]}"
+                     + (" (Cycles extrapolated)" if r.get("extrapolated") else ""))
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenes", nargs="+", default=["cornell_box", "lamp_scene"])
@@ -195,9 +405,36 @@ def main(argv=None) -> int:
     parser.add_argument("--no-ao", dest="ao", action="store_false", help="leave out AO against Cycles' AO bake")
     parser.add_argument("--device", default="auto", choices=core_settings.DEVICES)
     parser.add_argument("--output", type=Path, default=ROOT / "bench" / "results")
+    parser.add_argument("--lightmap", action="store_true", help="compare lightmaps with Cycles' image bake instead")
+    parser.add_argument("--lightmap-scene", default="cornell_box")
+    parser.add_argument("--truth-size", type=int, default=256, help="page with a high-sample Cycles truth")
+    parser.add_argument("--pair-sizes", type=int, nargs="*", default=[1024],
+                        help="pages whose Cycles noise is measured from pairs of bakes")
+    parser.add_argument("--pair-samples", type=int, nargs="+", default=[16, 64])
+    parser.add_argument("--extrapolated-sizes", type=int, nargs="*", default=[2048])
     args = parser.parse_args(argv)
     machine = platform.node() or "machine"
     stamp = datetime.date.today().isoformat()
+    if args.lightmap:
+        import os
+        import tempfile
+        load = os.getloadavg()[0]
+        results = {"machine": machine, "date": stamp, "platform": platform.platform(), "cpu_count": os.cpu_count(),
+                   "blender": bpy.app.version_string, "load_at_start": round(load, 2),
+                   "lightmap": {"scene": args.lightmap_scene,
+                                **run_lightmap(args.lightmap_scene, args.truth_size, args.samples,
+                                               args.reference_samples, args.pair_sizes, args.pair_samples,
+                                               args.extrapolated_sizes, Path(tempfile.mkdtemp(prefix="rb-acc-")))},
+                   "load_at_end": round(os.getloadavg()[0], 2)}
+        args.output.mkdir(parents=True, exist_ok=True)
+        base = args.output / f"accuracy-lightmap-{machine}-{stamp}"
+        base.with_suffix(".json").write_text(json.dumps(results, indent=2) + "\n")
+        table = lightmap_markdown(results)
+        base.with_suffix(".md").write_text(table + "\n")
+        lightmap_plot(results, base.with_suffix(".png"))
+        print(table)
+        print(f"wrote {base}.json, .md, .png")
+        return 0
     results = {"machine": machine, "date": stamp, "platform": platform.platform(),
                "cpu_count": __import__("os").cpu_count(), "blender": bpy.app.version_string,
                "scenes": {s: run_scene(s, args.methods, args.samples, args.reference_samples, args.device, args.ao)
