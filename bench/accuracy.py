@@ -426,25 +426,22 @@ def main(argv=None) -> int:
                                                args.reference_samples, args.pair_sizes, args.pair_samples,
                                                args.extrapolated_sizes, Path(tempfile.mkdtemp(prefix="rb-acc-")))},
                    "load_at_end": round(os.getloadavg()[0], 2)}
-        args.output.mkdir(parents=True, exist_ok=True)
-        base = args.output / f"accuracy-lightmap-{machine}-{stamp}"
-        base.with_suffix(".json").write_text(json.dumps(results, indent=2) + "\n")
-        table = lightmap_markdown(results)
-        base.with_suffix(".md").write_text(table + "\n")
-        lightmap_plot(results, base.with_suffix(".png"))
-        print(table)
-        print(f"wrote {base}.json, .md, .png")
-        return 0
+        return _write(args.output / f"accuracy-lightmap-{machine}-{stamp}", results, lightmap_markdown,
+                      lightmap_plot)
     results = {"machine": machine, "date": stamp, "platform": platform.platform(),
                "cpu_count": __import__("os").cpu_count(), "blender": bpy.app.version_string,
                "scenes": {s: run_scene(s, args.methods, args.samples, args.reference_samples, args.device, args.ao)
                           for s in args.scenes}}
-    args.output.mkdir(parents=True, exist_ok=True)
-    base = args.output / f"accuracy-{machine}-{stamp}"
+    return _write(args.output / f"accuracy-{machine}-{stamp}", results, markdown, plot)
+
+
+def _write(base: Path, results: dict, tables, plotter) -> int:
+    """``base``.json, .md (the tables) and .png (the plot) of ``results``; prints the tables."""
+    base.parent.mkdir(parents=True, exist_ok=True)
     base.with_suffix(".json").write_text(json.dumps(results, indent=2) + "\n")
-    table = markdown(results)
+    table = tables(results)
     base.with_suffix(".md").write_text(table + "\n")
-    plot(results, base.with_suffix(".png"))
+    plotter(results, base.with_suffix(".png"))
     print(table)
     print(f"wrote {base}.json, .md, .png")
     return 0

@@ -9,7 +9,8 @@ average before it, ``uptime``):
 
 - ``cornell``: one page of the Cornell box per size (reference solver, ``--atlas-pages one``, a
   density that fills the page): unwrap (uncached), raster, texel direct light (adaptive shadows at
-  the default budget), final gather, dilation; texels per second of direct light and of the gather.
+  the default budget), final gather, dilation; texels per second of direct light and of the gather;
+  with ``--baseline`` the older code's page of each size right after ours.
 - ``shadows``: direct light alone on one ``--shadow-size`` page of the Cornell box: fixed 16
   samples per texel and adaptive shadows at each ``--budgets``, their texels per second and
   relative RMSE against fixed ``--reference-samples`` per texel on the same page. ``--baseline
@@ -91,17 +92,23 @@ def _rmse(a, b) -> float:
     return float(np.sqrt((d ** 2).sum(axis=1).mean()) / np.linalg.norm(b[cov], axis=1).mean())
 
 
-def cornell(sizes) -> list:
+def cornell(sizes, baseline) -> list:
+    """Per size our page, and with ``baseline`` the older code's right after it (its defaults: one
+    page, 16 light samples per emitter): the same machine load for both."""
     rows = []
     for size in sizes:
-        load = _load()
-        r = _page_subprocess(dict(method="reference", target="lightmap", max_size=size, texel_density=1e4,
-                                  padding=4, atlas_pages="one"), tempfile.mkdtemp(prefix="rb-unwrap-"), None)
-        t = r["seconds"]
-        r.update(load=round(load, 2), texels_per_second_direct=round(r["texels"] / t["texel direct"]),
-                 texels_per_second_gather=round(r["texels"] / t["texel gather"]))
-        print(f"cornell {size}: {json.dumps(r)}", flush=True)
-        rows.append(r)
+        settings = dict(method="reference", target="lightmap", max_size=size, texel_density=1e4, padding=4)
+        for label, extra, path in (("ours", {"atlas_pages": "one"}, None), ("baseline", {}, baseline)):
+            if label == "baseline" and not baseline:
+                continue
+            load = _load()
+            r = _page_subprocess({**settings, **extra}, tempfile.mkdtemp(prefix="rb-unwrap-"), None, path)
+            t = r["seconds"]
+            r.update(code=label, load=round(load, 2),
+                     texels_per_second_direct=round(r["texels"] / t["texel direct"]),
+                     texels_per_second_gather=round(r["texels"] / t["texel gather"]))
+            print(f"cornell {size} {label}: {json.dumps(r)}", flush=True)
+            rows.append(r)
     return rows
 
 
@@ -236,7 +243,7 @@ def main(argv=None) -> int:
     out = {"host": socket.gethostname(), "machine": platform.machine(), "cpus": os.cpu_count(),
            "python": platform.python_version(), "date": time.strftime("%Y-%m-%d"),
            "load_at_start": round(_load(), 2)}
-    parts = {"cornell": lambda: cornell(args.sizes),
+    parts = {"cornell": lambda: cornell(args.sizes, args.baseline),
              "shadows": lambda: shadows(args.shadow_size, args.budgets, args.reference_samples, args.baseline),
              "lights": lambda: lights(args.emitters), "level": lambda: level(args.level_detail)}
     for name, run in parts.items():

@@ -2,10 +2,18 @@
 
 Lighting is irradiance/π at the receiver's normal (radiance units, W m⁻² sr⁻¹), as Cycles bakes
 DIFFUSE Direct without Color. Unoccluded transfer is analytic where it can be (exact polygon form
-factors for area lamps and emissive triangles, inverse-square for point/spot, cosine for sun);
-shadows are the visible fraction of stratified samples on the lamp, weighted by the transfer
-kernel so penumbrae stay unbiased where the kernel varies across the lamp. Samples are a rotated
-Hammersley set, stratified for any count.
+factors for area lamps and emissive triangles, inverse-square for point/spot, cosine for sun).
+
+Each receiver traces ``light_samples`` shadow rays in all, however many emitters there are: the
+samples are stratified over [0,1) and a light tree (``core.lighttree``) over every lamp and
+emissive triangle shares them out by importance (each node's interval of [0,1) split among its
+children), down to buckets of a few emitters weighed by their exact unoccluded light; with few
+emitters (``light_selection`` auto) every emitter is weighed exactly. An emitter's samples are
+points of one scrambled (0,2)-sequence on it, its shadow the visible fraction weighted by the
+transfer kernel (so penumbrae stay unbiased where the kernel varies across the lamp), and it adds
+transfer × shadow × its share of the samples / its probability: unbiased in the choice of emitters,
+the cost per receiver growing with the depth of the tree, log(emitters). Lightmap texels add
+adaptive shadows on top (``core.lightmap.shadows``): the kernel's PROBE and UNSHADOWED modes.
 """
 from __future__ import annotations
 

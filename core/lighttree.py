@@ -40,9 +40,9 @@ PI = np.pi
 class LightTree:
     """M nodes over L leaves, as kernels read them.
 
-    lo, hi: vec3[M] box of the node's emitters (m); axis: vec3[M] unit cone axis; theta_o:
-    float32[M] half-angle of the normals around it; theta_e: float32[M] emission spread beyond them
-    (π/2 for Lambertian emitters); two_sided: int32[M] whether −axis emits too; power: float32[M]
+    lo, hi: vec3[M] box of the node's emitters (m); axis: vec3[M] unit cone axis; cos_o, sin_o:
+    float32[M] of the half-angle θ_o of the normals around it; cos_e: float32[M] of the emission
+    spread θ_e beyond them (π/2 for Lambertian emitters: 0); two_sided: int32[M] whether −axis emits too; power: float32[M]
     summed power (lighting at unit distance, straight on); distant: int32[M] 1 for nodes of distant
     lamps (no position: the caller weighs them exactly); left, right: int32[M] children (−1 for a
     bucket); first, count: int32[M] the node's leaves in the leaf order; leaf_kind: int32[L]
@@ -53,8 +53,9 @@ class LightTree:
     lo: wp.array(dtype=wp.vec3)
     hi: wp.array(dtype=wp.vec3)
     axis: wp.array(dtype=wp.vec3)
-    theta_o: wp.array(dtype=wp.float32)
-    theta_e: wp.array(dtype=wp.float32)
+    cos_o: wp.array(dtype=wp.float32)
+    sin_o: wp.array(dtype=wp.float32)
+    cos_e: wp.array(dtype=wp.float32)
     two_sided: wp.array(dtype=wp.int32)
     power: wp.array(dtype=wp.float32)
     distant: wp.array(dtype=wp.int32)
@@ -239,8 +240,9 @@ def upload(nodes: Nodes, leaves: Leaves, device: str) -> LightTree:
     t = LightTree()
     for name in ("lo", "hi", "axis"):
         setattr(t, name, wp.array(np.ascontiguousarray(getattr(nodes, name)), dtype=wp.vec3, device=device))
-    for name in ("theta_o", "theta_e", "power"):
-        setattr(t, name, wp.array(getattr(nodes, name), dtype=wp.float32, device=device))
+    for name, values in (("cos_o", np.cos(nodes.theta_o)), ("sin_o", np.sin(nodes.theta_o)),
+                         ("cos_e", np.cos(nodes.theta_e)), ("power", nodes.power)):
+        setattr(t, name, wp.array(values.astype(np.float32), dtype=wp.float32, device=device))
     for name in ("two_sided", "distant", "left", "right", "first", "count"):
         setattr(t, name, wp.array(getattr(nodes, name).astype(np.int32), dtype=wp.int32, device=device))
     t.leaf_kind = wp.array(leaves.kind[nodes.order].astype(np.int32), dtype=wp.int32, device=device)
@@ -250,9 +252,18 @@ def upload(nodes: Nodes, leaves: Leaves, device: str) -> LightTree:
 
 
 @wp.func
+def _cos_past(cos_a: float, cos_b: float, sin_b: float) -> float:
+    """cos(max(0, a − b)) for angles a ∈ [0, π] (given its cosine) and b (cosine, sine; b ≥ π
+    where sin_b < 0): 1 inside b, else cos a·cos b + sin a·sin b."""
+    if sin_b < 0.0 or cos_a >= cos_b:
+        return 1.0
+    return cos_a * cos_b + wp.sqrt(wp.max(1.0 - cos_a * cos_a, 0.0)) * sin_b
+
+
+@wp.func
 def bound_importance(t: LightTree, node: int, p: wp.vec3, n: wp.vec3) -> float:
     """Importance of local ``node`` at a receiver at p with unit normal n (see the module); 0 only
-    where none of its emitters can light the receiver."""
+    where none of its emitters can light the receiver. In cosines: no inverse trigonometry."""
     lo = t.lo[node]
     hi = t.hi[node]
     c = 0.5 * (lo + hi)
@@ -262,28 +273,19 @@ def bound_importance(t: LightTree, node: int, p: wp.vec3, n: wp.vec3) -> float:
     if d2 <= r2:
         return t.power[node] / wp.max(r2, 1.0e-30)  # inside the bounding sphere: no cosine bound
     d = wp.sqrt(d2)
-    theta_u = wp.asin(wp.min(wp.sqrt(r2) / d, 1.0))
+    sin_u = wp.min(wp.sqrt(r2) / d, 1.0)  # the angle θ_u the bounding sphere subtends
+    cos_u = wp.sqrt(wp.max(1.0 - sin_u * sin_u, 0.0))
     w = v / d
-    theta_i = wp.max(wp.acos(wp.clamp(wp.dot(n, w), -1.0, 1.0)) - theta_u, 0.0)
-    if theta_i >= 1.5707963267948966:
+    cos_i = _cos_past(wp.clamp(wp.dot(n, w), -1.0, 1.0), cos_u, sin_u)
+    if cos_i <= 0.0:
         return 0.0  # wholly below the receiver's horizon
     cos_a = -wp.dot(t.axis[node], w)
     if t.two_sided[node] != 0:
         cos_a = wp.abs(cos_a)
-    theta = wp.max(wp.acos(wp.clamp(cos_a, -1.0, 1.0)) - t.theta_o[node] - theta_u, 0.0)
-    if theta >= t.theta_e[node]:
+    # the normals' cone widened by θ_u: θ_o + θ_u
+    co = t.cos_o[node]
+    so = t.sin_o[node]
+    cos_e = _cos_past(wp.clamp(cos_a, -1.0, 1.0), co * cos_u - so * sin_u, so * cos_u + co * sin_u)
+    if cos_e <= t.cos_e[node]:
         return 0.0  # outside every emission cone
-    return t.power[node] * wp.cos(theta_i) * wp.cos(theta) / d2
-
-
-def upload_empty(device: str) -> LightTree:
-    """A ``LightTree`` without emitters (root −1)."""
-    t = LightTree()
-    for name in ("lo", "hi", "axis"):
-        setattr(t, name, wp.zeros(1, dtype=wp.vec3, device=device))
-    for name in ("theta_o", "theta_e", "power"):
-        setattr(t, name, wp.zeros(1, dtype=wp.float32, device=device))
-    for name in ("two_sided", "distant", "left", "right", "first", "count", "leaf_kind", "leaf_index"):
-        setattr(t, name, wp.zeros(1, dtype=wp.int32, device=device))
-    t.root = -1
-    return t
+    return t.power[node] * cos_i * cos_e / d2

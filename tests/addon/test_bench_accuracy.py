@@ -54,3 +54,25 @@ def test_accuracy_bench_writes_tables_and_plot_for_lighting_and_ao(tmp_path):
     table = json_path.with_suffix(".md").read_text()
     assert "| lamp_scene | **bunnell** (cpu) |" in table and "| lamp_scene | **ao** (cpu) |" in table
     assert json_path.with_suffix(".png").stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_accuracy_bench_lightmap_mode_places_our_page_on_cycles_curves(tmp_path):
+    """Small pages: a truth at one size, Cycles' noise from pairs of bakes at a larger one, and an
+    extrapolated one; each with our error, Cycles' curve and the equal-error speedups."""
+    accuracy = _accuracy_module()
+    assert accuracy.main(["--lightmap", "--truth-size", "48", "--samples", "4", "16", "--reference-samples",
+                          "128", "--pair-sizes", "64", "--pair-samples", "4", "16", "--extrapolated-sizes",
+                          "96", "--output", str(tmp_path)]) == 0
+    (json_path,) = tmp_path.glob("accuracy-lightmap-*.json")
+    sizes = json.loads(json_path.read_text())["lightmap"]["sizes"]
+    assert list(sizes) == ["48", "64", "96"] and sizes["96"]["extrapolated"]
+    for row in sizes.values():
+        assert [c["samples"] for c in row["cycles"]] == [4, 16]
+        assert row["cycles"][1]["relative_rmse"] < row["cycles"][0]["relative_rmse"]
+        assert 0 < row["ours_relative_rmse"] < row["cycles"][0]["relative_rmse"]
+        assert row["speedup_vs_cycles"] > 0 and row["ours_seconds"] > 0
+        if accuracy._oidn() is not None:
+            assert row["speedup_vs_cycles_oidn"] > 0 and "denoised_relative_rmse" in row["cycles"][0]
+    assert "**ours**" in json_path.with_suffix(".md").read_text()
+    assert json_path.with_suffix(".png").stat().st_size > 10_000
