@@ -340,8 +340,8 @@ def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes,
             row[f"{label}_seconds_at_equal_error"] = round(t, 3)
             row[f"speedup_vs_{label}"] = round(t / seconds, 2)
             row[f"{label}_extrapolated"] = extrapolated
-        print(f"  lightmap {size}: ours RMSE {ours:.4f}; {json.dumps({k: v for k, v in row.items() if 'speedup' in k})}",
-              flush=True)
+        speedups = {k: v for k, v in row.items() if "speedup" in k}
+        print(f"  lightmap {size}: ours RMSE {ours:.4f}; {json.dumps(speedups)}", flush=True)
         out["sizes"][str(size)] = row
     return out
 
@@ -405,7 +405,8 @@ def main(argv=None) -> int:
     parser.add_argument("--no-ao", dest="ao", action="store_false", help="leave out AO against Cycles' AO bake")
     parser.add_argument("--device", default="auto", choices=core_settings.DEVICES)
     parser.add_argument("--output", type=Path, default=ROOT / "bench" / "results")
-    parser.add_argument("--lightmap", action="store_true", help="compare lightmaps with Cycles' image bake instead")
+    parser.add_argument("--lightmap", action="store_true",
+                        help="compare lightmaps with Cycles' image bake instead")
     parser.add_argument("--lightmap-scene", default="cornell_box")
     parser.add_argument("--truth-size", type=int, default=256, help="page with a high-sample Cycles truth")
     parser.add_argument("--pair-sizes", type=int, nargs="*", default=[1024],

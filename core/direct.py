@@ -101,8 +101,7 @@ class Lights:
         g.lamp_smooth = wp.array(((1.0 - cos_half) * lamps.spot_blend).astype(np.float32),
                                  dtype=wp.float32, device=d)
         leaves = _leaves(lamps, tri, radiance)
-        self.tree = lighttree.build(leaves) if len(leaves) else None
-        g.tree = (lighttree.upload(self.tree, leaves, d) if self.tree is not None
+        g.tree = (lighttree.upload(lighttree.build(leaves), leaves, d) if len(leaves)
                   else lighttree.upload_empty(d))
         self.emitters = g
 
@@ -119,7 +118,6 @@ def _leaves(lamps, tri: np.ndarray, radiance: np.ndarray) -> lighttree.Leaves:
                     np.where(kind == LAMP_SUN, 0.0, size[:, 0]))
     lamp_power = lamps.power.astype(np.float64).sum(axis=1)
     lamp_power = lamp_power * np.where(kind == LAMP_AREA, 1.0 / PI ** 2, 1.0 / (4.0 * PI ** 2))
-    centre = tri.mean(axis=1)
     nt = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area = 0.5 * np.linalg.norm(nt, axis=1)
     pos = lamps.position.astype(np.float64)
@@ -128,7 +126,8 @@ def _leaves(lamps, tri: np.ndarray, radiance: np.ndarray) -> lighttree.Leaves:
     lamp_theta_o = np.where(kind == LAMP_AREA, 0.0, np.where(kind == LAMP_SPOT, np.minimum(
         0.5 * lamps.spot_size.astype(np.float64), PI), PI))
     return lighttree.Leaves(
-        kind=np.concatenate([np.full(nl, lighttree.LEAF_LAMP), np.full(len(tri), lighttree.LEAF_TRIANGLE)]).astype(np.int32),
+        kind=np.concatenate([np.full(nl, lighttree.LEAF_LAMP),
+                             np.full(len(tri), lighttree.LEAF_TRIANGLE)]).astype(np.int32),
         index=np.concatenate([np.arange(nl), np.arange(len(tri))]).astype(np.int32),
         lo=np.concatenate([pos - half[:, None], tri.min(axis=1)]).astype(np.float32),
         hi=np.concatenate([pos + half[:, None], tri.max(axis=1)]).astype(np.float32),
@@ -136,7 +135,8 @@ def _leaves(lamps, tri: np.ndarray, radiance: np.ndarray) -> lighttree.Leaves:
         theta_o=np.concatenate([lamp_theta_o, np.zeros(len(tri))]).astype(np.float32),
         theta_e=np.full(nl + len(tri), 0.5 * PI, np.float32),
         two_sided=np.concatenate([np.zeros(nl, bool), np.ones(len(tri), bool)]),
-        power=np.concatenate([lamp_power, radiance.astype(np.float64).sum(axis=1) * area / PI]).astype(np.float32),
+        power=np.concatenate([lamp_power,
+                              radiance.astype(np.float64).sum(axis=1) * area / PI]).astype(np.float32),
         distant=np.concatenate([kind == LAMP_SUN, np.zeros(len(tri), bool)]))
 
 

@@ -42,12 +42,12 @@ class LightTree:
 
     lo, hi: vec3[M] box of the node's emitters (m); axis: vec3[M] unit cone axis; cos_o, sin_o:
     float32[M] of the half-angle θ_o of the normals around it; cos_e: float32[M] of the emission
-    spread θ_e beyond them (π/2 for Lambertian emitters: 0); two_sided: int32[M] whether −axis emits too; power: float32[M]
-    summed power (lighting at unit distance, straight on); distant: int32[M] 1 for nodes of distant
-    lamps (no position: the caller weighs them exactly); left, right: int32[M] children (−1 for a
-    bucket); first, count: int32[M] the node's leaves in the leaf order; leaf_kind: int32[L]
-    LEAF_LAMP or LEAF_TRIANGLE; leaf_index: int32[L] the lamp or emissive triangle; root (−1: no
-    emitters).
+    spread θ_e beyond them (π/2 for Lambertian emitters: 0); two_sided: int32[M] whether −axis
+    emits too; power: float32[M] summed power (lighting at unit distance, straight on); distant:
+    int32[M] 1 for nodes of distant lamps (no position: the caller weighs them exactly); left, right:
+    int32[M] children (−1 for a bucket); first, count: int32[M] the node's leaves in the leaf order;
+    leaf_kind: int32[L] LEAF_LAMP or LEAF_TRIANGLE; leaf_index: int32[L] the lamp or emissive
+    triangle; root (−1: no emitters).
     """
 
     lo: wp.array(dtype=wp.vec3)

@@ -273,9 +273,9 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
             pages += _pages(g, UDIM_FIRST + tile if len(tiles) > 1 else None, members, (side, side), density)
     for name, (asked, used) in densities.items():
         if used < asked * 0.999:
-            warnings.append(f"lightmap of {name}: {asked:g} texels/m would not fit "
-                            f"{settings.max_size}² texels{'' if settings.atlas_pages == 'many' else ' with the others'}: "
-                            f"{used:.3g} texels/m used")
+            others = "" if settings.atlas_pages == "many" else " with the others"
+            warnings.append(f"lightmap of {name}: {asked:g} texels/m would not fit {settings.max_size}² "
+                            f"texels{others}: {used:.3g} texels/m used")
     s = settings.supersample
 
     def rasterize_all():
