@@ -18,19 +18,20 @@ import warp as wp
 from .errors import SettingsError
 
 _initialised = False
+_load_lock = threading.RLock()
 # The package's modules that hold kernels (relative to this package), loaded by load_kernels.
 KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "lightmap.raster")
-_load_lock = threading.Lock()
 
 
 def init_warp() -> None:
-    """Initialise Warp once, quietly."""
+    """Initialise Warp once, quietly (from any thread)."""
     global _initialised
-    if not _initialised:
-        wp.config.log_level = wp.LOG_WARNING
-        wp.config.verbose = False
-        wp.init()
-        _initialised = True
+    with _load_lock:
+        if not _initialised:
+            wp.config.log_level = wp.LOG_WARNING
+            wp.config.verbose = False
+            wp.init()
+            _initialised = True
 
 
 @dataclass(frozen=True)
@@ -68,15 +69,19 @@ def load_kernels(device: Device, on_compile: Optional[Callable[[], None]] = None
     with _load_lock:
         for name in KERNEL_MODULES:
             module = importlib.import_module(f"{package}.{name}")
-            wm = wp.get_module(module.__name__)
-            block_dim = 1 if not device.is_cuda else None
-            ident = wm.get_module_identifier(block_dim)
-            if not os.path.isdir(os.path.join(wp.config.kernel_cache_dir, ident)):
+            if not _cached(module, device):
                 if compiled == 0 and on_compile is not None:
                     on_compile()
                 compiled += 1
             wp.load_module(module, device=device.name)
     return compiled
+
+
+def _cached(module, device: Device) -> bool:
+    """Whether Warp's kernel cache holds ``module`` compiled for ``device`` (CPU launches load the
+    block_dim 1 variant)."""
+    ident = wp.get_module(module.__name__).get_module_identifier(None if device.is_cuda else 1)
+    return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, ident))
 
 
 def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,

@@ -33,10 +33,12 @@ import warp as wp
 
 from . import device as device_mod
 from .formfactor import disk_ff, fan_ff
-from .hemisphere import BINS, CELL, Splat, add, bins_vec, frame_of, raise_to, splat_of
+from .hemisphere import BINS, CELL, bins_vec, frame_of, splat_of
 from .hierarchy import Nodes
 from .problem import Surfels
 from .traversal import cut_advance, cut_begin, cut_skip, cut_weight, opening
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
 # Open a node when d² < OPEN·radius² (blended over ±10 %): the cluster disk then subtends less than
 # ~14°, where its form factor is within the 2 % the tests ask of the all-pairs sum.
@@ -81,17 +83,19 @@ def cluster_ff(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spr
 
 
 @wp.func
-def fan_centre(s: Surfels, e: int) -> wp.vec3:
+def fan_centre(e: int, vertex: wp.array(dtype=wp.int32), fan_offsets: wp.array(dtype=wp.int32),
+               fan_triangles: wp.array(dtype=wp.int32), tris: wp.array(dtype=wp.int32),
+               points: wp.array(dtype=wp.vec3)) -> wp.vec3:
     """The area-weighted centre of element e's share of its triangles (a third each, around its
     vertex)."""
     total = float(0.0)
     acc = wp.vec3(0.0)
-    pv = s.points[s.vertex[e]]
-    for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
-        tri = s.fan_triangles[k]
-        a = s.points[s.tris[3 * tri]]
-        b = s.points[s.tris[3 * tri + 1]]
-        c = s.points[s.tris[3 * tri + 2]]
+    pv = points[vertex[e]]
+    for k in range(fan_offsets[e], fan_offsets[e + 1]):
+        tri = fan_triangles[k]
+        a = points[tris[3 * tri]]
+        b = points[tris[3 * tri + 1]]
+        c = points[tris[3 * tri + 2]]
         w = wp.length(wp.cross(b - a, c - a))
         total += w
         acc += w * (pv + (a + b + c) / 3.0) * 0.5
@@ -107,107 +111,48 @@ def leaf_blend(d2: float, area: float) -> float:
 
 
 @wp.func
-def leaf_direction(t: Nodes, s: Surfels, node: int, p: wp.vec3, d2: float) -> wp.vec3:
-    """Where a leaf lies as seen from p: its disk's centre far away, the centre of its triangles
-    near (blended as its transfer is): the direction stays defined for a receiver on the element
-    itself."""
-    blend = leaf_blend(d2, t.area[node])
-    v = t.position[node] - p
-    if blend < 1.0:
-        v = blend * v + (1.0 - blend) * (fan_centre(s, t.element[node]) - p)
-    return wp.normalize(v)
-
-
-@wp.func
-def leaf_transfer(t: Nodes, s: Surfels, node: int, p: wp.vec3, n: wp.vec3, d2: float) -> wp.vec4:
-    """(front far, back far, front exact, back exact) form factors of leaf ``node`` from p (normal
-    n): the disk beyond NEAR, the element's own triangles inside, blended over ±10 %."""
-    a = t.area[node]
-    q = t.position[node]
-    nq = t.normal[node]
+def leaf_transfer(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, a: float, e: int, d2: float,
+                  fan_offsets: wp.array(dtype=wp.int32), fan_triangles: wp.array(dtype=wp.int32),
+                  tris: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3)) -> wp.vec4:
+    """(front far, back far, front exact, back exact) form factors of a leaf (disk at q, normal nq,
+    area a, element e) from p (normal n) at squared distance d2: the disk beyond NEAR, the
+    element's own triangles inside, blended over ±10 %."""
     blend = leaf_blend(d2, a)
     out = wp.vec4(0.0)
     if blend > 0.0:
         out[0] = blend * disk_ff(p, n, q, nq, a)
         out[1] = blend * disk_ff(p, n, q, -nq, a)
     if blend < 1.0:
-        e = t.element[node]
         # A surface facing the receiver in its own plane is in contact with it (a box resting on
         # the floor): seen from a hair off the receiver, as Cycles' offset rays see it, it covers
         # the hemisphere instead of vanishing edge-on.
         pe = p
         if wp.dot(nq, n) < 0.0:
             pe = p - n * (CONTACT * wp.sqrt(a))
-        out[2] = (1.0 - blend) * fan_ff(pe, n, e, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-        out[3] = (1.0 - blend) * fan_ff(p, n, e, -1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-    return out
-
-
-@wp.struct
-class Cover:
-    """What a receiver's hemisphere cells hold during a gather: per cell the far front cover, its
-    largest single far part, the far back cover, the near-field front and back cover, and the far
-    front light per channel; near_light is the near field's light (never capped)."""
-
-    front: bins_vec
-    peak: bins_vec
-    back: bins_vec
-    near: bins_vec
-    near_back: bins_vec
-    red: bins_vec
-    green: bins_vec
-    blue: bins_vec
-    near_light: wp.vec3
-
-
-@wp.func
-def cover_empty() -> Cover:
-    c = Cover()
-    c.front = bins_vec()
-    c.peak = bins_vec()
-    c.back = bins_vec()
-    c.near = bins_vec()
-    c.near_back = bins_vec()
-    c.red = bins_vec()
-    c.green = bins_vec()
-    c.blue = bins_vec()
-    c.near_light = wp.vec3(0.0)
-    return c
-
-
-@wp.func
-def cover_add(c: Cover, sp: Splat, part: wp.vec4, light: wp.vec3) -> Cover:
-    """``c`` with one sender's parts (far front, far back, exact front, exact back) and its
-    radiance ``light`` added in the cells of ``sp``."""
-    out = c
-    out.front = add(c.front, sp, part[0])
-    out.peak = raise_to(c.peak, sp, part[0])
-    out.back = add(c.back, sp, part[1])
-    out.near = add(c.near, sp, part[2])
-    out.near_back = add(c.near_back, sp, part[3])
-    out.red = add(c.red, sp, light[0] * part[0])
-    out.green = add(c.green, sp, light[1] * part[0])
-    out.blue = add(c.blue, sp, light[2] * part[0])
-    out.near_light = c.near_light + light * part[2]
+        out[2] = (1.0 - blend) * fan_ff(pe, n, e, 1.0, fan_offsets, fan_triangles, tris, points)
+        out[3] = (1.0 - blend) * fan_ff(p, n, e, -1.0, fan_offsets, fan_triangles, tris, points)
     return out
 
 
 @wp.func
-def cover_resolve(c: Cover) -> wp.vec4:
-    """(occlusion, light r, g, b): each cell covered at most once. Near-field parts count whole,
-    and so does the largest single far part (a wide sender can exceed a cell); stacked parts fill
-    what they leave. Front and back faces of one closed object show the same directions: the
-    larger of the two, not their sum. Senders stacked in one cell share what is left of it: their
-    mean radiance."""
+def resolve(near: bins_vec, near_back: bins_vec, front: bins_vec, back: bins_vec, peak: bins_vec,
+            red: bins_vec, green: bins_vec, blue: bins_vec, near_light: wp.vec3) -> wp.vec4:
+    """(occlusion, light r, g, b) of a receiver from its cells: per cell the near-field front and
+    back cover, the far front and back cover, the largest single far front part and the far
+    front light per channel; near_light the near field's light. Each cell is covered at most
+    once: near-field parts count whole, and so does the largest single far part (a wide sender can
+    exceed a cell); stacked parts fill what they leave. Front and back faces of one closed object
+    show the same directions: the larger of the two, not their sum. Senders stacked in one cell
+    share what is left of it: their mean radiance."""
     occ = float(0.0)
-    light = c.near_light
+    light = near_light
     for b in range(BINS):
-        blocked = wp.max(c.near[b], c.near_back[b])
-        fill = wp.max(c.front[b] + c.near[b], c.back[b] + c.near_back[b])
-        occ += wp.max(wp.max(blocked, c.peak[b]), wp.min(fill, CELL))
-        f = c.front[b]
+        blocked = wp.max(near[b], near_back[b])
+        fill = wp.max(front[b] + near[b], back[b] + near_back[b])
+        occ += wp.max(wp.max(blocked, peak[b]), wp.min(fill, CELL))
+        f = front[b]
         if f > 0.0:
-            light += wp.vec3(c.red[b], c.green[b], c.blue[b]) * wp.min(1.0, wp.max(CELL - blocked, c.peak[b]) / f)
+            light += wp.vec3(red[b], green[b], blue[b]) * wp.min(1.0, wp.max(CELL - blocked, peak[b]) / f)
     return wp.vec4(occ, light[0], light[1], light[2])
 
 
@@ -221,53 +166,83 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     p = rp[i]
     n = rn[i]
     f = frame_of(n)
-    cover = cover_empty()
+    # the receiver's cells (see resolve)
+    front = bins_vec()
+    peak = bins_vec()
+    back = bins_vec()
+    near = bins_vec()
+    near_back = bins_vec()
+    red = bins_vec()
+    green = bins_vec()
+    blue = bins_vec()
+    near_light = wp.vec3(0.0)
     raw = float(0.0)
     dirsum = wp.vec3(0.0)
     visits = int(0)
-    cut = cut_begin(t)
+    cut = cut_begin(t.root, t.level[t.root])
     while cut.node >= 0:
         node = cut.node
         visits += 1
-        v = t.position[node] - p
+        q = t.position[node]
+        v = q - p
         r = t.radius[node]
         d2 = wp.dot(v, v)
         dist = wp.sqrt(d2)
-        if dist - r >= distance or wp.dot(v, n) <= -r or t.area[node] <= 0.0:
-            cut = cut_skip(t, cut)
+        area = t.area[node]
+        if dist - r >= distance or wp.dot(v, n) <= -r or area <= 0.0:
+            cut = cut_skip(cut, t.next[node])
             continue
-        w = cut_weight(t, cut)
+        level = t.level[node]
+        w = cut_weight(cut, level)
+        child = t.descend[node]
         part = wp.vec4(0.0)
         take = float(1.0)
-        leaf = t.descend[node] < 0
-        if leaf:
+        dhat = v / dist
+        if child < 0:
             if dist < distance:
-                part = w * leaf_transfer(t, s, node, p, n, d2)
+                e = t.element[node]
+                part = w * leaf_transfer(p, n, q, t.normal[node], area, e, d2, s.fan_offsets,
+                                         s.fan_triangles, s.tris, s.points)
+                # Within about the element's own size the direction to its disk's centre is no
+                # longer where its triangles are (and undefined for a receiver on the element):
+                # towards the centre of its triangles instead, blended in.
+                toward = wp.clamp((d2 / area - 0.25) / 0.75, 0.0, 1.0)
+                if toward < 1.0 and part[0] + part[1] + part[2] + part[3] > 0.0:
+                    centre = fan_centre(e, s.vertex, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+                    dhat = wp.normalize(toward * v + (1.0 - toward) * (centre - p))
         else:
             # Never nearer than a leaf would take its exact form factor: a chain of one-child
             # cells over a single disk must reach that leaf's near field.
-            take = opening(d2, r, NEAR * t.area[node], open_k)
+            take = opening(d2, r, NEAR * area, open_k)
             if take > 0.0:
                 # A far node straddling the AO distance counts with the part of its depth inside
                 # (opening it down to the leaves would visit a whole shell of them per receiver).
                 share = w * take * wp.clamp((distance - dist + r) / (2.0 * r), 0.0, 1.0)
-                q = t.position[node]
                 nq = t.normal[node]
-                part[0] = share * cluster_ff(p, n, q, nq, t.area[node], t.spread[node], t.leaves[node])
-                part[1] = share * cluster_ff(p, n, q, -nq, t.area[node], t.spread[node], t.leaves[node])
-        cut = cut_advance(t, cut, take)
+                part[0] = share * cluster_ff(p, n, q, nq, area, t.spread[node], t.leaves[node])
+                part[1] = share * cluster_ff(p, n, q, -nq, area, t.spread[node], t.leaves[node])
+        cut = cut_advance(cut, level, child, t.level[wp.max(child, 0)], t.next[node], take)
         total = part[0] + part[1] + part[2] + part[3]
         if total > 0.0:
-            dhat = v / dist
-            if leaf:
-                dhat = leaf_direction(t, s, node, p, d2)
             raw += total
             dirsum += dhat * total
             light = wp.vec3(0.0)
             if with_light != 0:
                 light = radiance[node]
-            cover = cover_add(cover, splat_of(f, dhat), part, light)
-    res = cover_resolve(cover)
+            sp = splat_of(f, dhat)
+            for k in range(4):  # the splat's cells, updated in place
+                c = sp.cells[k]
+                wk = sp.weights[k]
+                front[c] += part[0] * wk
+                peak[c] = wp.max(peak[c], part[0] * wk)
+                back[c] += part[1] * wk
+                near[c] += part[2] * wk
+                near_back[c] += part[3] * wk
+                red[c] += light[0] * part[0] * wk
+                green[c] += light[1] * part[0] * wk
+                blue[c] += light[2] * part[0] * wk
+            near_light += light * part[2]
+    res = resolve(near, near_back, front, back, peak, red, green, blue, near_light)
     occ = res[0]
     out_access[i] = wp.clamp(1.0 - occ, 0.0, 1.0)
     out_visits[i] = visits

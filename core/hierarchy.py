@@ -25,6 +25,8 @@ import warp as wp
 from . import device as device_mod
 from .problem import Surfels
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 MORTON_BITS = 10  # per axis: 30-bit codes
 # Levels of the tree at most: the leaves and one per Morton bit (the traversal keeps a weight per level).
 MAX_LEVELS = MORTON_BITS + 1

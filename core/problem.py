@@ -22,6 +22,8 @@ from .scene import SceneData
 from .settings import Settings
 from .stages import Stages
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 
 @wp.struct
 class Surfels:

@@ -16,6 +16,8 @@ from .. import device as device_mod
 from ..formfactor import tangent_frame
 from ..rays import lift
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 # Half a texel's diagonal (texel units): a triangle within this distance of a texel's centre
 # overlaps the texel.
 REACH = 0.7072

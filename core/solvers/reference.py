@@ -25,6 +25,8 @@ from ..problem import Surfels
 from ..rays import lift
 from .base import Solution, reconstruct_with_detail
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 # Below this many disk areas of squared distance the disk approximation is replaced by the
 # exact form factor of the sender's triangles. ALGORITHMS.md §1 suggests 4–8 for a fast method;
 # the reference pays ~50 % more time for 64, which keeps the perpendicular-squares form factor
