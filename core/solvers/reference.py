@@ -176,8 +176,7 @@ class Transport:
         n = problem.elements.count
         self.problem = problem
         self.n = n
-        budget = 4 * int(settings.max_pairs)  # bytes
-        self.mode = MATRIX if 4 * n * n <= budget else VISIBILITY if n * n <= budget else TRACED
+        self.mode = _mode(n, settings.max_pairs)
         need = {MATRIX: 4 * n * n, VISIBILITY: n * n, TRACED: 0}[self.mode]
         free = device_mod.free_memory(problem.device)
         if free is not None and need > 0.8 * free:
@@ -217,6 +216,12 @@ class Transport:
         return int(self.traced.numpy()[0])
 
 
+def _mode(n: int, max_pairs: int) -> int:
+    """The transport mode the budget (``max_pairs`` × 4 bytes) allows for n elements."""
+    budget = 4 * int(max_pairs)
+    return MATRIX if 4 * n * n <= budget else VISIBILITY if n * n <= budget else TRACED
+
+
 def predicted_seconds(problem) -> float:
     """How long the transport's visibility takes on ``problem``'s device (s), from the measured
     rate; in TRACED mode once per sweep, up to ``bounces`` sweeps."""
@@ -225,22 +230,26 @@ def predicted_seconds(problem) -> float:
     rate = PAIRS_PER_SECOND_PER_THREAD * dev.threads * (CUDA_SPEEDUP if dev.is_cuda else 1.0)
     rate *= 4.0 / max(1, problem.settings.visibility_rays)
     seconds = 0.5 * n * n / rate
-    if 4 * n * n > 4 * problem.settings.max_pairs and n * n > 4 * problem.settings.max_pairs:
-        seconds *= 2 * problem.settings.bounces  # traced: every sweep traces every row
+    if _mode(n, problem.settings.max_pairs) == TRACED:
+        seconds *= 2 * problem.settings.bounces  # every sweep traces every row again
     return seconds
 
 
 def check(problem) -> list[str]:
     """Warnings before the solve: a bake predicted to run long says so, with the pair count and
-    the method to use instead."""
+    the method to use instead (and the budget that would keep the visibility)."""
     seconds = predicted_seconds(problem)
     if seconds < SLOW_SECONDS:
         return []
     n = problem.elements.count
-    return [f"the reference solver traces {n * n / 2:.3g} element pairs for {n} elements: "
-            f"predicted {_duration(seconds)} on {problem.device.name} ({problem.device.threads} "
-            f"threads); use --method bunnell for scenes this large (the reference is the "
-            f"yardstick for small scenes)"]
+    message = (f"the reference solver traces {n * n / 2:.3g} element pairs for {n} elements: "
+               f"predicted {_duration(seconds)} on {problem.device.name} ({problem.device.threads} "
+               f"threads); use --method bunnell for scenes this large (the reference is the "
+               f"yardstick for small scenes)")
+    if _mode(n, problem.settings.max_pairs) == TRACED:
+        message += (f"; its visibility does not fit --max-pairs {problem.settings.max_pairs} and is "
+                    f"traced again every sweep: --max-pairs {-(-n * n // 4)} keeps it ({n * n / 2**30:.2f} GiB)")
+    return [message]
 
 
 def _duration(seconds: float) -> str:
