@@ -95,10 +95,20 @@ class Problem:
         s.fan_offsets = wp.array(els.fan_offsets, dtype=wp.int32, device=d)
         s.fan_triangles = wp.array(els.fan_triangles, dtype=wp.int32, device=d)
         self.surfels = s
+        # The solution of the previous frame of an animation (``pipeline.Sequence``), which
+        # iterating solvers start from; None for a first or single frame.
+        self.previous = None
         self.counts = {"objects": len(scene.object_names), "triangles": scene.num_triangles,
                        "vertices": scene.num_vertices, "shading_vertices": self.shading.count,
                        "elements": els.count, "lamps": len(scene.lamps),
                        "emissive_triangles": self.lights.num_emitters, "rays": 0}
+
+    def same_topology(self, scene: SceneData) -> bool:
+        """Whether ``scene`` has this problem's vertices, triangles and shading split (so it can
+        ``move`` to it)."""
+        return (scene.num_vertices == self.scene.num_vertices
+                and np.array_equal(scene.triangles, self.scene.triangles)
+                and np.array_equal(elements_mod.shading_vertices(scene).corner, self.shading.corner))
 
     def move(self, scene: SceneData) -> None:
         """Take the positions, normals, materials and lamps of ``scene`` — the same triangles and
@@ -128,6 +138,7 @@ class Problem:
             getattr(s, name).assign(getattr(els, {"pos": "position", "nrm": "normal"}.get(name, name)))
         s.area.assign(els.area)
         self.__dict__.pop("direct", None)
+        self.counts["rays"] = 0
         if "tree" in self.__dict__:
             from . import hierarchy
 

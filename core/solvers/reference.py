@@ -49,11 +49,11 @@ def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
     inside a curved closed mesh."""
     total = float(0.0)
     for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        total += _triangle_area2(s, s.fan_triangles[k])
+        total += _triangle_area2(s.points, s.tris, s.fan_triangles[k])
     pick = u0 * total
     chosen = s.fan_triangles[s.fan_offsets[j]]
     for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        pick -= _triangle_area2(s, s.fan_triangles[k])
+        pick -= _triangle_area2(s.points, s.tris, s.fan_triangles[k])
         if pick <= 0.0:
             chosen = s.fan_triangles[k]
             break
@@ -67,9 +67,10 @@ def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
 
 
 @wp.func
-def _triangle_area2(s: Surfels, t: int) -> float:
-    a = s.points[s.tris[3 * t]]
-    return wp.length(wp.cross(s.points[s.tris[3 * t + 1]] - a, s.points[s.tris[3 * t + 2]] - a))
+def _triangle_area2(points: wp.array(dtype=wp.vec3), tris: wp.array(dtype=wp.int32), t: int) -> float:
+    """Twice the area of triangle t (the arrays, not the Surfels struct: Warp copies structs)."""
+    a = points[tris[3 * t]]
+    return wp.length(wp.cross(points[tris[3 * t + 1]] - a, points[tris[3 * t + 2]] - a))
 
 
 @wp.func
@@ -262,8 +263,9 @@ def _duration(seconds: float) -> str:
 
 def solve(problem) -> Solution:
     """Indirect lighting per element (float32[n,3], irradiance/π) from the problem's direct
-    lighting: Jacobi sweeps until the largest change is below ``tolerance`` × the largest
-    lighting value, or after ``bounces`` sweeps."""
+    lighting: Jacobi sweeps, from the previous frame's solution in an animation, until the
+    largest change is below ``tolerance`` × the largest lighting value, or after ``bounces``
+    sweeps."""
     settings, stages = problem.settings, problem.stages
     direct = problem.direct
     d = problem.device.name
@@ -271,9 +273,11 @@ def solve(problem) -> Solution:
     stages.run("form factors", transport.build, stages.reporter("form factors"))
     n = problem.elements.count
     dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
-    current = wp.zeros(n, dtype=wp.vec3, device=d)
+    # An animation's previous frame is the starting point: its light has mostly converged already.
+    start = problem.previous.values if problem.previous is not None else np.zeros((n, 3), np.float32)
+    current = wp.array(start, dtype=wp.vec3, device=d)
     nxt = wp.zeros(n, dtype=wp.vec3, device=d)
-    before = np.zeros((n, 3), np.float32)
+    before = start
     scale_direct = float(np.abs(direct).max(initial=0.0))
     sweeps = 0
     for sweeps in range(1, settings.bounces + 1):
