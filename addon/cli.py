@@ -281,6 +281,7 @@ def _report(job: BakeJob, settings: Settings, blend: str, outputs: dict) -> dict
         "counts": result.counts,
         "peak_memory_bytes": result.peak_memory_bytes,
         "warnings": job.warnings,
+        "frames": job.frames,
         "input": blend,
         "outputs": outputs,
         "lightmaps": {page: str(path) for page, path in job.lightmap_files.items()},

@@ -338,8 +338,10 @@ class OBJECT_OT_radiosity_bake_clear(bpy.types.Operator):
     def execute(self, context):
         objects = [ob for ob in context.selected_objects] if self.use_selected else []
         objects = objects or list(context.scene.objects)
-        removed = clear(objects)
-        self.report({'INFO'}, f"Radiosity lightmaps: {removed} items removed")
+        from . import animation
+
+        removed = clear(objects) + animation.clear(objects)
+        self.report({'INFO'}, f"Radiosity bake: {removed} items removed")
         return {'FINISHED'}
 
 

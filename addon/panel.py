@@ -48,6 +48,10 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         row = layout.row()
         row.scale_y = 1.5
         row.operator(OBJECT_OT_radiosity_bake.bl_idname, text="Bake", icon='RENDER_STILL')
+        row = layout.row(align=True)
+        row.prop(s, "frames", text="")
+        row.operator(OBJECT_OT_radiosity_bake.bl_idname, text="Bake Animation",
+                     icon='RENDER_ANIMATION').animation = True
         layout.operator("object.radiosity_bake_clear", text="Clear Lightmaps", icon='TRASH')
         stats = s.last_bake
         if stats.device:

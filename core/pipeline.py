@@ -30,8 +30,8 @@ class BakeResult:
     direct, indirect: its two parts.
     output: the content the settings asked for (lighting, combined, indirect or ao: accessibility
     in all three channels).
-    corner_vertex: int32[T,3], the shading vertex of each scene triangle corner (where a mesh
-    vertex's corners get their values).
+    shading: the ``core.elements.ShadingVertices`` the values are per (its ``corner``: the shading
+    vertex of each scene triangle corner, where a mesh vertex's corners get their values).
     timings: seconds per stage; counts: objects, triangles, elements, lamps, rays, pairs, iterations.
     lightmap: the lightmap pages (``core.lightmap.LightmapResult``) when a lightmap was requested.
     """
@@ -40,7 +40,7 @@ class BakeResult:
     direct: np.ndarray
     indirect: np.ndarray
     output: np.ndarray
-    corner_vertex: np.ndarray
+    shading: object
     device: str
     timings: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
@@ -65,9 +65,10 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
 
 class Sequence:
     """Bakes the frames of an animation one after another (or one scene, as :func:`bake` does),
-    reusing what carries over from one frame to the next: while the topology stays, the problem
-    (its device arrays updated, the BVH and the tree refitted: ``Problem.move``) and the previous
-    frame's solution, which solvers that iterate start from (``problem.previous``).
+    reusing what carries over from one frame to the next: while the topology (and the split into
+    shading vertices) stays, the problem (its device arrays updated, the BVH and the tree refitted:
+    ``Problem.move``) and the previous frame's solution, which solvers that iterate start from
+    (``problem.previous``).
 
     progress, cancel, notify: as for :func:`bake`; ``bake(scene, label=…)`` prefixes the stages it
     reports with the label (e.g. the frame).
@@ -92,9 +93,10 @@ class Sequence:
         for name in settings.unread():
             stages.warn(f"{flag(name)} is not used by method {settings.solver}")
         problem = self.problem
-        if problem is not None and problem.same_topology(scene):
+        shading = problem.shading_of(scene) if problem is not None else None
+        if shading is not None:
             problem.stages = stages
-            stages.run("move", problem.move, scene)
+            stages.run("move", problem.move, scene, shading)
             problem.previous = self._solution
         else:
             problem = self.problem = Problem(scene, settings, stages)
@@ -120,7 +122,7 @@ class Sequence:
             lightmap_result = bake_lightmaps(lightmap, problem, solver, solution)
             problem.counts["texels"] = lightmap_result.texels
         return BakeResult(lighting=(direct + indirect).astype(np.float32), direct=direct,
-                          indirect=indirect, output=output, corner_vertex=problem.shading.corner,
+                          indirect=indirect, output=output, shading=problem.shading,
                           device=problem.device.name, timings=stages.timings,
                           counts=dict(problem.counts), warnings=stages.warnings,
                           peak_memory_bytes=_peak_rss_bytes(), lightmap=lightmap_result)

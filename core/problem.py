@@ -103,18 +103,21 @@ class Problem:
                        "elements": els.count, "lamps": len(scene.lamps),
                        "emissive_triangles": self.lights.num_emitters, "rays": 0}
 
-    def same_topology(self, scene: SceneData) -> bool:
-        """Whether ``scene`` has this problem's vertices, triangles and shading split (so it can
-        ``move`` to it)."""
-        return (scene.num_vertices == self.scene.num_vertices
-                and np.array_equal(scene.triangles, self.scene.triangles)
-                and np.array_equal(elements_mod.shading_vertices(scene).corner, self.shading.corner))
+    def shading_of(self, scene: SceneData):
+        """The shading vertices of ``scene`` when it has this problem's vertices, triangles and
+        split (so the problem can ``move`` to it), else None. A flat-shaded mesh that deforms can
+        change its split (coplanar faces stop being coplanar): its elements change then."""
+        if scene.num_vertices != self.scene.num_vertices or not np.array_equal(scene.triangles,
+                                                                                self.scene.triangles):
+            return None
+        shading = elements_mod.shading_vertices(scene)
+        return shading if np.array_equal(shading.corner, self.shading.corner) else None
 
-    def move(self, scene: SceneData) -> None:
+    def move(self, scene: SceneData, shading=None) -> None:
         """Take the positions, normals, materials and lamps of ``scene`` — the same triangles and
         vertices, deformed or moved (an animation frame) — keeping this problem's frame, device
-        arrays and BVH (refitted), and the tree (refitted) if built. Direct light is traced again
-        when next asked for."""
+        arrays and BVH (refitted) and the tree (refitted) if built; ``shading``: the scene's split
+        when known (``shading_of``). Direct light is traced again when next asked for."""
         if (scene.num_vertices, scene.num_triangles) != (self.scene.num_vertices, self.scene.num_triangles):
             raise BakeError("the scene's topology changed: build a new problem")
         try:
@@ -126,9 +129,11 @@ class Problem:
         lamps = replace(scene.lamps, position=(np.asarray(scene.lamps.position, np.float64)
                                                 + shift).astype(np.float32))
         self.scene = scene = replace(scene, positions=positions, lamps=lamps, origin=self.scene.origin)
-        self.shading = elements_mod.shading_vertices(scene)
-        if self.shading.count != self.elements.count:
-            raise BakeError("the scene's shading topology changed: build a new problem")
+        shading = shading if shading is not None else elements_mod.shading_vertices(scene)
+        if not np.array_equal(shading.corner, self.shading.corner):
+            raise BakeError("the scene's shading vertices changed: build a new problem")
+        # the split is the scene's; its positions are taken in this problem's frame
+        self.shading = shading = replace(shading, position=np.ascontiguousarray(positions[shading.vertex]))
         self.elements = els = elements_mod.build(scene, self.shading)
         self.mesh.points.assign(positions)
         self.mesh.refit()

@@ -88,6 +88,7 @@ class Option:
     length: bool = False
     folder: bool = False
     digits: Optional[int] = None
+    placeholder: Optional[str] = None
 
 
 def _option(default, label, help, group, **kwargs):
@@ -124,6 +125,10 @@ class Settings:
                              "byte a pair)", "solver", low=1)
     seed: int = _option(1, "Seed", "random seed of the sample jitter (results are deterministic "
                         "for a seed)", "solver", low=0)
+    frames: str = _option("", "Frames", "frame range A:B[:STEP] to bake as an animation, each "
+                          "frame into its own attribute or lightmap image of a sequence (empty: "
+                          "the current frame; the panel's Bake Animation button: the scene's frame "
+                          "range)", "output", placeholder="A:B[:STEP]")
     bake_copy: bool = _option(False, "Bake Copy", "when modifiers change an object's vertex count, "
                               "bake into a new object '<name>_baked' instead of skipping it",
                               "output")
@@ -180,10 +185,25 @@ class Settings:
             raise SettingsError("attribute name must not be empty")
         if self.target != "vertex_colors" and not self.output.strip():
             raise SettingsError("output folder must not be empty when baking lightmaps")
+        self.frame_list()
         if self.content == "indirect" and not SOLVERS[self.solver].indirect:
             raise SettingsError(f"content indirect needs a method with indirect light; method "
                                 f"{self.method} computes none (it would bake black)")
         return self
+
+    def frame_list(self) -> Optional[list[int]]:
+        """The frames of ``frames`` (A:B or A:B:STEP, B included), None when empty; raises
+        SettingsError for anything else."""
+        text = self.frames.strip()
+        if not text:
+            return None
+        try:
+            parts = [int(x) for x in text.split(":")]
+        except ValueError:
+            parts = []
+        if len(parts) not in (2, 3) or parts[1] < parts[0] or (len(parts) == 3 and parts[2] < 1):
+            raise SettingsError(f"frames must be A:B or A:B:STEP with A ≤ B and STEP ≥ 1, not {text!r}")
+        return list(range(parts[0], parts[1] + 1, parts[2] if len(parts) == 3 else 1))
 
     def unread(self) -> list[str]:
         """Settings changed from their defaults that the chosen solver does not read (for a
@@ -227,6 +247,8 @@ def metavar(name: str) -> Optional[str]:
     """The placeholder of Settings field ``name``'s value on the command line (None: a switch or
     a choice)."""
     opt, default = option(name), _DEFAULTS[name]
+    if opt.placeholder is not None:
+        return opt.placeholder
     if opt.choices is not None or isinstance(default, bool):
         return None
     if isinstance(default, (int, float)):

@@ -160,6 +160,7 @@ class RecordingLayout:
 
     def operator(self, idname, **kwargs):
         self.shown.append(idname)
+        return SimpleNamespace()  # the operator's properties, which a panel may set
 
     def label(self, text="", **kwargs):
         self.shown.append(text)
