@@ -19,6 +19,7 @@ from typing import Callable, Iterable, Optional
 from ..core import BakeCancelled, BakeError, Settings
 from ..core.pipeline import Sequence
 from . import animation, extract, lightmap, props, write
+from .outputs import Staging
 
 # Errors caused by the scene, the settings (core.errors.SettingsError is a BakeError) or where the
 # results go (outputs.OutputError): shown to the user as their message alone. Anything else is a
@@ -52,6 +53,9 @@ class BakeJob:
         self._frame = None          # the frame being baked (None: the current one, no animation)
         self._frame_now = None      # the scene's frame when the bake started
         self._baked: list = []      # (frame, extraction, result) per baked frame
+        self._first_lightmap = None  # an animation's first frame: (request, LightmapResult, paths)
+        self._staging = None        # an animation's lightmap files, staged frame by frame
+        self._folder = None
         self.frames: list = []
         self._cancel = threading.Event()
         self._lock = threading.Lock()
@@ -107,8 +111,11 @@ class BakeJob:
         return stage, fraction, done
 
     def cancel(self) -> None:
-        """Ask the bake to stop at its next check; ``finish()`` then raises BakeCancelled."""
+        """Ask the bake to stop at its next check; ``finish()`` then raises BakeCancelled (and
+        removes what was staged; so does this call when no frame is baking)."""
         self._cancel.set()
+        if self._thread is None or not self._thread.is_alive():
+            self._discard_staging()
 
     def finish(self, context) -> list[str]:
         """Wait for the bake, then write the results in one step; returns all warnings.
@@ -120,7 +127,14 @@ class BakeJob:
         if self.error is None and self._cancel.is_set():
             self.error = BakeCancelled("bake cancelled")
         if self.error is not None:
+            self._discard_staging()
             raise self.error
+        try:
+            return self._write(context)
+        finally:
+            self._discard_staging()
+
+    def _write(self, context) -> list[str]:
         t0 = time.perf_counter()
         # Every check first (objects resolved by name, names free): a failure writes nothing.
         colors = maps = None
@@ -132,14 +146,22 @@ class BakeJob:
             else:
                 colors = write.prepare_color_attributes(self.extraction, self.result.output,
                                                         self.settings.attribute, self.settings, context)
-        if self.lightmap_request is not None:
-            maps = lightmap.prepare(self.result.lightmap, self.lightmap_request, self.settings)
+        sequence = None
+        if self._staging is not None:  # an animation: the first frame's layout, staged files
+            request, result, self.lightmap_files = self._first_lightmap
+            maps = lightmap.prepare(result, request, self.settings)
+            self._staging.commit()
+            frames = [f for f, _, _ in self._baked]
+            sequence = (frames[0], frames[-1] - frames[0] + 1)
+        elif self.lightmap_request is not None:
+            result = self.result.lightmap
+            maps = lightmap.prepare(result, self.lightmap_request, self.settings)
             # files next, all or none: a disk error leaves Blender untouched
-            self.lightmap_files = lightmap.write_files(self.result.lightmap, self.settings)
+            self.lightmap_files = lightmap.write_files(result, self.settings)
         if colors is not None:
             self.warnings += colors.apply(context)
         if maps is not None:
-            self.warnings += maps.apply(self.result.lightmap, self.lightmap_files, self.settings)
+            self.warnings += maps.apply(result, self.lightmap_files, self.settings, sequence)
         self.timings["write"] = time.perf_counter() - t0
         self.seconds = time.perf_counter() - self._t0
         if hasattr(context.scene, "radiosity_baker"):  # the CLI may run without the add-on registered
@@ -151,9 +173,13 @@ class BakeJob:
         self.settings.validate()
         self._frame_now = context.scene.frame_current
         self._sequence = Sequence(self.settings, self._on_progress, self._cancel, self._notify)
+        if self.animation and self.settings.bake_copy:
+            raise BakeError("--bake-copy bakes one frame's evaluated mesh: it does not go with a "
+                            "frame range")
         if self.animation and self.settings.target != "vertex_colors":
-            raise BakeError("lightmap sequences are not baked yet: bake an animation into color "
-                            "attributes (--target vertex_colors)")
+            # every frame's pages are staged as they are baked and go into place together
+            self._folder = lightmap.output_folder(self.settings)
+            self._staging = Staging()
 
     def _extract(self, context) -> None:
         """Extract the next frame (the current one for a still bake), the scene's frame restored."""
@@ -195,8 +221,15 @@ class BakeJob:
                 write.check_color_attributes(self.extraction, name, self.settings, context)
         if self.settings.target in ("lightmap", "both"):
             lightmap.output_folder(self.settings)  # an unwritable folder fails before baking
-            self.lightmap_request, warnings = lightmap.request(self.extraction, self.settings)
-            self.warnings += warnings
+            request, warnings = lightmap.request(self.extraction, self.settings)
+            first = self._first_lightmap
+            if first is not None:  # an animation's later frames: the first frame's layout
+                for t in request.targets:
+                    t.corner_uv = first[1].uv.get(t.mesh_name, t.corner_uv)
+                request.sizes = first[1].sizes
+            else:
+                self.warnings += warnings
+            self.lightmap_request = request
 
     # -- any thread ------------------------------------------------------------------------------
 
@@ -217,11 +250,35 @@ class BakeJob:
         for stage, seconds in self.result.timings.items():
             self.timings[stage] = self.timings.get(stage, 0.0) + seconds
         self.warnings += [w for w in self.result.warnings if w not in self.warnings]
+        if self._staging is not None:
+            try:
+                self._stage_lightmaps()
+            except BaseException as exc:  # noqa: BLE001 - re-raised by finish()
+                self.error = exc
+                return
         if self.animation:
             self._baked.append((self._frame, self.extraction, self.result))
             self.frames.append({"frame": self._frame, "seconds": round(time.perf_counter() - t0, 4),
                                 "stages": {k: round(v, 4) for k, v in self.result.timings.items()},
                                 "counts": self.result.counts})
+
+    def _stage_lightmaps(self) -> None:
+        """Stage the pages of the frame just baked as ``<page>.<frame>.exr``, and again for each
+        frame up to the next baked one (a sequence with a step holds each frame), so the image
+        sequence has a file for every scene frame."""
+        upto = self._todo[0] if self._todo else self._frame + 1
+        paths = None
+        for frame in range(self._frame, upto):
+            written = lightmap.write_files(self.result.lightmap, self.settings, self._staging, frame,
+                                           self._folder)
+            paths = paths or written
+        if self._first_lightmap is None:
+            self._first_lightmap = (self.lightmap_request, self.result.lightmap, paths)
+
+    def _discard_staging(self) -> None:
+        if self._staging is not None:
+            self._staging.__exit__(None, None, None)  # removes what was staged
+            self._staging = None
 
     def _on_progress(self, stage: str, fraction: float) -> None:
         with self._lock:

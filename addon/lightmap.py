@@ -13,6 +13,7 @@ and a warning says so.
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,17 +127,24 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
     return LightmapRequest(targets, python=python_executable(), cache_dir=_cache_dir()), warnings
 
 
-def write_files(result, settings) -> dict[str, Path]:
-    """Write each page as ``<folder>/<page>.exr`` plus a ``.png`` preview; {page name: exr path}.
+def write_files(result, settings, staging=None, frame=None, folder=None) -> dict[str, Path]:
+    """Write each page as ``<folder>/<page>.exr`` (``<page>.<frame>.exr`` for a frame of an
+    animation, four digits: a Blender image sequence) plus a ``.png`` preview; {page name: exr path}.
 
     All files are written under temporary names, read back, then moved into place together: on
-    any failure (OutputError) the folder is as it was.
+    any failure (OutputError) the folder is as it was. ``staging``: an ``outputs.Staging`` the
+    caller commits (an animation's frames go into place together); ``folder``: the output folder
+    when known (it is resolved through Blender, on the main thread).
     """
-    folder = output_folder(settings)
+    folder = folder if folder is not None else output_folder(settings)
+    suffix = "" if frame is None else f".{frame:04d}"
     paths = {}
-    with Staging() as staging:
+    with contextlib.ExitStack() as stack:
+        own = staging is None
+        if own:
+            staging = stack.enter_context(Staging())
         for page in result.pages:
-            stem = bpy.path.clean_name(page.name)
+            stem = bpy.path.clean_name(page.name) + suffix
             paths[page.name] = folder / f"{stem}.exr"
             with staging.writing(paths[page.name]) as temp:
                 files.write_exr(temp, page.rgb, settings.lightmap_format)
@@ -144,7 +152,8 @@ def write_files(result, settings) -> dict[str, Path]:
             with staging.writing(folder / f"{stem}.png") as temp:
                 files.write_preview(temp, page.rgb)
                 files.verify(temp, page.size)
-        staging.commit()
+        if own:
+            staging.commit()
     return paths
 
 
@@ -157,16 +166,21 @@ class LightmapWrites:
     hookups: list
     warnings: list
 
-    def apply(self, result, paths: dict, settings) -> list[str]:
+    def apply(self, result, paths: dict, settings, frames=None) -> list[str]:
         """UV maps, images (loaded from ``paths``, {page name: exr path}) and material nodes;
-        returns all warnings."""
+        returns all warnings. frames: (first, count) of an animation's image sequences, whose first
+        files ``paths`` names."""
         for me, uv in self.uv:
             _write_uv(me, uv)
-        images = {page.name: _load_image(page.name, paths[page.name], settings.pack_images)
-                  for page in result.pages}
         warnings = list(self.warnings)
+        pack = settings.pack_images and frames is None
+        if settings.pack_images and frames is not None:
+            warnings.append("lightmap image sequences are not packed (Blender packs single images): "
+                            "keep the output folder with the .blend")
+        images = {page.name: _load_image(page.name, paths[page.name], pack, frames is not None)
+                  for page in result.pages}
         for mat, page in self.hookups:
-            warnings += _hook_up(mat, images[page], settings.hookup == "multiply")
+            warnings += _hook_up(mat, images[page], settings.hookup == "multiply", frames)
         return warnings
 
 
@@ -235,9 +249,10 @@ def _write_uv(me, uv: np.ndarray) -> None:
     me.update()
 
 
-def _load_image(name: str, path: Path, pack: bool):
+def _load_image(name: str, path: Path, pack: bool, sequence: bool = False):
     """Our image ``name`` reloaded from ``path``, or a new one loaded from it (a user's image of
-    that name is left alone: Blender gives ours a numbered name)."""
+    that name is left alone: Blender gives ours a numbered name); ``sequence``: ``path`` is the
+    first file of an image sequence."""
     image = next((im for im in bpy.data.images if im.get(IMAGE_TAG) == name), None)
     if image is not None and Path(bpy.path.abspath(image.filepath)).resolve() == path:
         if image.packed_file is not None:
@@ -248,15 +263,17 @@ def _load_image(name: str, path: Path, pack: bool):
         image.name = name
         image[IMAGE_TAG] = name
         image.use_fake_user = True  # kept in the saved file even before a material uses it
+    image.source = "SEQUENCE" if sequence else "FILE"
     image.colorspace_settings.name = COLORSPACE
     if pack:
         image.pack()
     return image
 
 
-def _hook_up(mat, image, multiply: bool) -> list[str]:
+def _hook_up(mat, image, multiply: bool, frames=None) -> list[str]:
     """Add (or update) the UV Map + Image Texture pair showing ``image``; with ``multiply`` also a
-    Mix (Multiply) node between the Principled BSDF's Base Color and what fed it."""
+    Mix (Multiply) node between the Principled BSDF's Base Color and what fed it. frames: (first,
+    count) of an image sequence, played with the scene's frames."""
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     uv_node = nodes.get(NODE_UV) or nodes.new("ShaderNodeUVMap")
     uv_node.name, uv_node.label, uv_node.uv_map = NODE_UV, "Lightmap UV", UV_NAME
@@ -264,6 +281,11 @@ def _hook_up(mat, image, multiply: bool) -> list[str]:
     tex.name, tex.label, tex.image, tex.interpolation = NODE_IMAGE, "Lightmap", image, "Linear"
     if not tex.inputs["Vector"].is_linked:
         links.new(uv_node.outputs["UV"], tex.inputs["Vector"])
+    if frames is not None:  # file number = scene frame (frame_start − 1 + offset + 1)
+        first, count = frames
+        user = tex.image_user
+        user.frame_start, user.frame_duration, user.frame_offset = first, count, first - 1
+        user.use_auto_refresh = True
     left = min((n.location.x for n in nodes if not n.name.startswith(NODE_PREFIX)), default=0.0)
     tex.location = (left - 320.0, -400.0)
     uv_node.location = (left - 520.0, -400.0)

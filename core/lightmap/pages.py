@@ -39,11 +39,14 @@ class LightmapTarget:
 @dataclass
 class LightmapRequest:
     """What to lightmap. python: interpreter for the xatlas worker (default sys.executable);
-    cache_dir: unwrap cache (default ``unwrap.default_cache_dir()``)."""
+    cache_dir: unwrap cache (default ``unwrap.default_cache_dir()``); sizes: {layout group: (page
+    size, density)} to keep for reused UVs (an animation's later frames keep the first frame's
+    pages, ``LightmapResult.sizes``), None to size them by the density."""
 
     targets: list
     python: Optional[str] = None
     cache_dir: Optional[Path] = None
+    sizes: Optional[dict] = None
 
 
 @dataclass
@@ -67,13 +70,15 @@ class Page:
 class LightmapResult:
     """pages; uv: {mesh name: float32[C,2]} layouts made by this bake (to write as ``Lightmap``);
     seam_error: largest difference across smooth UV seams relative to the brightest texel of its
-    page (0 without seams); texels: covered texels; warnings."""
+    page (0 without seams); texels: covered texels; warnings; sizes: {layout group: (page size,
+    density)} (see ``LightmapRequest.sizes``)."""
 
     pages: list
     uv: dict
     seam_error: float = 0.0
     texels: int = 0
     warnings: list = field(default_factory=list)
+    sizes: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -206,7 +211,8 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
                                     f"chart seam are distorted; triangulate the mesh for exact charts")
     for g in groups:
         if g.name not in sizes:
-            sizes[g.name] = _page_side(g.owners, scene, uvs, settings)
+            sizes[g.name] = ((request.sizes or {}).get(g.name)
+                             or _page_side(g.owners, scene, uvs, settings))
 
     # Pages: (name, objects, size, density, targets whose triangles it holds)
     pages = []
@@ -269,7 +275,8 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
     for message in warnings:
         stages.warn(message)
     return LightmapResult(pages=result_pages, uv=made, seam_error=seam_error,
-                          texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings)
+                          texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings,
+                          sizes=sizes)
 
 
 def _resolve(texels: raster.Texels, values: np.ndarray, w: int, h: int, s: int):

@@ -125,3 +125,40 @@ def test_a_bad_frame_range_is_a_usage_error(room, tmp_path, frames):
     blend = tmp_path / "room.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     assert cli.main(["bake", str(blend), "--frames", frames]) == 2
+
+
+def test_a_lightmap_animation_is_an_image_sequence_with_a_file_per_frame(room, tmp_path):
+    from radiosity_baker.core.lightmap import files
+
+    settings = Settings(frames="1:17:8", method="bunnell", light_samples=2, device="cpu",
+                        target="lightmap", texel_density=6.0, output=str(tmp_path / "maps"),
+                        hookup="node")
+    BakeJob(settings, receivers=["Floor", "Column"]).run_sync(bpy.context)
+    written = sorted(p.name for p in (tmp_path / "maps").glob("*.exr"))
+    assert written == [f"Lightmap.{f:04d}.exr" for f in range(1, 18)]  # held between baked frames
+    pages = {f: files.read_exr(tmp_path / "maps" / f"Lightmap.{f:04d}.exr") for f in (1, 5, 9, 17)}
+    np.testing.assert_array_equal(pages[1], pages[5])  # frame 5 holds frame 1
+    assert pages[1].shape == pages[17].shape and np.abs(pages[1] - pages[17]).max() > 0.01
+    image = next(im for im in bpy.data.images if im.get("radiosity_baker_lightmap"))
+    assert image.source == "SEQUENCE"
+    mat = bpy.data.objects["Column"].material_slots[0].material
+    user = mat.node_tree.nodes["RB Lightmap"].image_user
+    assert (user.frame_start, user.frame_duration, user.use_auto_refresh) == (1, 17, True)
+    assert "Lightmap" in bpy.data.objects["Column"].data.uv_layers
+
+
+def test_a_cancelled_lightmap_animation_leaves_the_output_folder_as_it_was(room, tmp_path):
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    (maps / "mine.txt").write_text("user file")
+    settings = Settings(frames="1:17:8", method="direct", device="cpu", target="lightmap",
+                        texel_density=6.0, output=str(maps))
+
+    def progress(stage, fraction):
+        if stage.startswith("frame 17:"):
+            job.cancel()
+
+    job = BakeJob(settings, receivers=["Floor"], progress=progress)
+    with pytest.raises(BakeCancelled):
+        job.run_sync(bpy.context)
+    assert sorted(p.name for p in maps.iterdir()) == ["mine.txt"]
