@@ -6,7 +6,7 @@ import threading
 
 import bpy
 
-from . import cli, lightmap, operator, panel, props
+from . import cli, lightmap, live, operator, panel, props
 
 _cli_handle = None
 
@@ -41,6 +41,7 @@ def register() -> None:
     _use_extension_warp_cache()
     _compile_kernels_ahead()
     props.register()
+    live.register()
     for cls in operator.classes + lightmap.classes + panel.classes:
         bpy.utils.register_class(cls)
     try:
@@ -56,4 +57,5 @@ def unregister() -> None:
         _cli_handle = None
     for cls in reversed(operator.classes + lightmap.classes + panel.classes):
         bpy.utils.unregister_class(cls)
+    live.unregister()
     props.unregister()

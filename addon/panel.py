@@ -60,6 +60,30 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
             box.label(text=f"{stats.elements} elements, {stats.triangles} triangles")
 
 
+class RENDER_PT_radiosity_bake_live(bpy.types.Panel):
+    bl_label = "Live Preview"
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = "render"
+    bl_parent_id = RENDER_PT_radiosity_bake.__name__
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.radiosity_baker_live, "enabled", text="")
+
+    def draw(self, context):
+        from . import live
+
+        layout = self.layout
+        s = context.scene.radiosity_baker
+        layout.prop(context.scene.radiosity_baker_live, "keep")
+        layout.label(text=f"Shows '{live.preview_attribute(s)}' (Solid › Attribute colour)")
+        running = live.session()
+        if running is not None:
+            layout.label(text=f"{running.solves} solves ({running.settings.method})")
+            if running.error:
+                layout.label(text=running.error, icon='ERROR')
+
+
 class RENDER_PT_radiosity_bake_advanced(bpy.types.Panel):
     bl_label = "Advanced"
     bl_space_type = 'PROPERTIES'
@@ -77,4 +101,4 @@ class RENDER_PT_radiosity_bake_advanced(bpy.types.Panel):
             _prop(layout, s, name)
 
 
-classes = (RENDER_PT_radiosity_bake, RENDER_PT_radiosity_bake_advanced)
+classes = (RENDER_PT_radiosity_bake, RENDER_PT_radiosity_bake_live, RENDER_PT_radiosity_bake_advanced)
