@@ -60,12 +60,17 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
             box.label(text=f"{stats.elements} elements, {stats.triangles} triangles")
 
 
-class RENDER_PT_radiosity_bake_live(bpy.types.Panel):
-    bl_label = "Live Preview"
+class _SubPanel:
+    """Where the sub-panels of Radiosity Bake sit."""
+
     bl_space_type = 'PROPERTIES'
     bl_region_type = 'WINDOW'
     bl_context = "render"
     bl_parent_id = RENDER_PT_radiosity_bake.__name__
+
+
+class RENDER_PT_radiosity_bake_live(_SubPanel, bpy.types.Panel):
+    bl_label = "Live Preview"
 
     def draw_header(self, context):
         self.layout.prop(context.scene.radiosity_baker_live, "enabled", text="")
@@ -84,12 +89,8 @@ class RENDER_PT_radiosity_bake_live(bpy.types.Panel):
                 layout.label(text=running.error, icon='ERROR')
 
 
-class RENDER_PT_radiosity_bake_advanced(bpy.types.Panel):
+class RENDER_PT_radiosity_bake_advanced(_SubPanel, bpy.types.Panel):
     bl_label = "Advanced"
-    bl_space_type = 'PROPERTIES'
-    bl_region_type = 'WINDOW'
-    bl_context = "render"
-    bl_parent_id = RENDER_PT_radiosity_bake.__name__
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw(self, context):

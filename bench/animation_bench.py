@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import os
 import platform
 import statistics
@@ -38,9 +37,9 @@ from radiosity_baker.core import Settings, metrics  # noqa: E402
 from radiosity_baker.core.pipeline import Sequence  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results"
 sys.path.insert(0, str(ROOT / "bench"))
 from accuracy import equal_error_seconds  # noqa: E402
+import results_file  # noqa: E402
 
 
 def _make_samples():
@@ -137,10 +136,7 @@ def main(argv=None) -> int:
                          speedup_per_frame=round(seconds / per_frame, 1), extrapolated=extrapolated)
                 print(method, m["vs_cycles"], m["speedup_per_frame"], flush=True)
         out["sizes"].append(entry)
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    path = RESULTS / f"animation-{platform.node() or 'machine'}.json"
-    path.write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {path}")
+    results_file.write("animation", out)
     return 0
 
 

@@ -24,7 +24,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results"
+sys.path.insert(0, str(ROOT / "bench"))
+import results_file  # noqa: E402
 
 
 def build_room(path: Path, elements: int) -> None:
@@ -111,10 +112,7 @@ def main(argv=None) -> int:
             print(runs[-1], flush=True)
     out = {"machine": platform.node(), "cpu_count": os.cpu_count(), "load_before": round(load, 2),
            "max_pairs": args.max_pairs, "compare_with": str(args.compare_with or ""), "runs": runs}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    path = RESULTS / f"reference-{platform.node() or 'machine'}.json"
-    path.write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {path}")
+    results_file.write("reference", out)
     return 0
 
 
