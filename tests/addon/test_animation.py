@@ -162,3 +162,12 @@ def test_a_cancelled_lightmap_animation_leaves_the_output_folder_as_it_was(room,
     with pytest.raises(BakeCancelled):
         job.run_sync(bpy.context)
     assert sorted(p.name for p in maps.iterdir()) == ["mine.txt"]
+
+
+def test_the_panels_bake_animation_button_bakes_the_scenes_frame_range(room):
+    room.frame_start, room.frame_end, room.frame_step = 1, 17, 8
+    room.radiosity_baker.method = "direct"
+    assert room.radiosity_baker.frames == ""  # the scene's range, then
+    assert bpy.ops.object.radiosity_bake(animation=True, use_selected=False) == {'FINISHED'}
+    names = set(bpy.data.objects["Door"].data.attributes.keys())
+    assert {animation.frame_attribute("Lighting", f) for f in FRAMES} <= names
