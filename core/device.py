@@ -85,25 +85,28 @@ def _cached(module, device: Device) -> bool:
 
 
 def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
-           on_chunk: Optional[Callable[[float], None]] = None) -> None:
+           on_chunk: Optional[Callable[[float], None]] = None, serial: bool = False) -> None:
     """Launch ``kernel`` over ``n`` threads, ``kernel(offset, *inputs)``.
 
     The range is cut into ``chunks`` consecutive waves (progress and cancellation happen between
     waves through ``on_chunk(fraction_done)``, which may raise); on the CPU each wave is further
-    split over ``device.threads`` threads.
+    split over ``device.threads`` threads — unless ``serial``: Warp's atomics are plain
+    read-modify-writes on the CPU, so a kernel whose threads meet on one value through atomics
+    must run its CPU waves on one thread.
     """
     if n <= 0:
         return
     chunks = max(1, min(chunks, n))
     step = -(-n // chunks)
-    pool = ThreadPoolExecutor(device.threads) if device.threads > 1 else None
+    threads = 1 if serial and not device.is_cuda else device.threads
+    pool = ThreadPoolExecutor(threads) if threads > 1 else None
     try:
         for start in range(0, n, step):
             count = min(step, n - start)
             if pool is None:
                 wp.launch(kernel, dim=count, inputs=[start, *inputs], device=device.name)
             else:
-                sub = -(-count // device.threads)
+                sub = -(-count // threads)
                 futures = [pool.submit(wp.launch, kernel, dim=min(sub, count - s),
                                        inputs=[start + s, *inputs], device=device.name)
                            for s in range(0, count, sub)]

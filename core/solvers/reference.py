@@ -108,9 +108,10 @@ def pair_hits(s: Surfels, i: int, j: int, rays: int, seed: int) -> int:
 @wp.kernel
 def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: int,
                   matrix: wp.array2d(dtype=wp.float32), visibility: wp.array2d(dtype=wp.uint8),
-                  traced: wp.array(dtype=wp.int64)):
+                  traced: wp.array(dtype=wp.int32)):
     """Thread t fills rows t and n−1−t against every later column (the same work per thread):
-    M[i, j] and M[j, i] (``matrix``) or their shared visibility (``visibility``)."""
+    M[i, j] and M[j, i] (``matrix``) or their shared visibility (``visibility``); ``traced[t]``
+    counts its rays (no atomics: they are not atomic on the CPU)."""
     t = wp.tid() + offset
     count = int(0)
     for side in range(2):
@@ -134,15 +135,15 @@ def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
                 else:
                     visibility[i, j] = wp.uint8(hits)
                     visibility[j, i] = wp.uint8(hits)
-    wp.atomic_add(traced, 0, wp.int64(count))
+    traced[t] = count
 
 
 @wp.kernel
 def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: int,
                   matrix: wp.array2d(dtype=wp.float32), visibility: wp.array2d(dtype=wp.uint8),
                   direct: wp.array(dtype=wp.vec3), indirect: wp.array(dtype=wp.vec3),
-                  out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int64)):
-    """One Jacobi sweep of row i: out_i = Σ_j M_ij ρ_j (D_j + I_j)."""
+                  out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int32)):
+    """One Jacobi sweep of row i: out_i = Σ_j M_ij ρ_j (D_j + I_j); ``traced[i]`` its rays."""
     i = wp.tid() + offset
     acc = wp.vec3(0.0)
     count = int(0)
@@ -164,8 +165,7 @@ def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
             if m > 0.0:
                 acc += m * wp.cw_mul(s.albedo[j], direct[j] + indirect[j])
     out[i] = acc
-    if count > 0:
-        wp.atomic_add(traced, 0, wp.int64(count))
+    traced[i] = count
 
 
 class Transport:
@@ -188,7 +188,8 @@ class Transport:
         self.matrix = wp.zeros((n, n) if self.mode == MATRIX else (1, 1), dtype=wp.float32, device=d)
         self.visibility = wp.zeros((n, n) if self.mode == VISIBILITY else (1, 1), dtype=wp.uint8,
                                    device=d)
-        self.traced = wp.zeros(1, dtype=wp.int64, device=d)
+        self.traced = wp.zeros(n, dtype=wp.int32, device=d)  # rays per row (thread) of a launch
+        self._rays = 0
         self.rays = int(settings.visibility_rays)
         self.seed = int(settings.seed) + 7919
 
@@ -201,6 +202,7 @@ class Transport:
                           [n, self.problem.surfels, self.rays, self.seed, self.mode, self.matrix,
                            self.visibility, self.traced],
                           self.problem.device, chunks=max(1, min(64, n // 128)), on_chunk=progress)
+        self._count()
 
     def sweep(self, direct: wp.array, indirect: wp.array, out: wp.array, progress=None) -> None:
         """out ← M (ρ ⊙ (direct + indirect)) (vec3[n] device arrays)."""
@@ -211,10 +213,17 @@ class Transport:
                           self.problem.device,
                           chunks=1 if self.mode == MATRIX else max(1, min(16, n // 256)),
                           on_chunk=progress)
+        if self.mode == TRACED:
+            self._count()
+
+    def _count(self) -> None:
+        """Add the rays the last launch traced (per-thread counts, summed in int64)."""
+        self._rays += int(self.traced.numpy().astype(np.int64).sum())
+        self.traced.zero_()
 
     @property
     def rays_traced(self) -> int:
-        return int(self.traced.numpy()[0])
+        return self._rays
 
 
 def _mode(n: int, max_pairs: int) -> int:
