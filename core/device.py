@@ -19,7 +19,8 @@ from .errors import SettingsError
 
 _initialised = False
 # The package's modules that hold kernels (relative to this package), loaded by load_kernels.
-KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "lightmap.raster")
+KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "links", "solvers.hierarchical",
+                  "lightmap.raster")
 _load_lock = threading.Lock()
 
 

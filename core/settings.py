@@ -122,6 +122,13 @@ class Settings:
     max_pairs: int = _option(16_000_000, "Max Pairs", "memory budget of the all-pairs transport, "
                              "in element pairs at 4 bytes each (the visibility alone takes 1 "
                              "byte a pair)", "solver", low=1)
+    link_threshold: float = _option(0.01, "Link Threshold", "largest unoccluded transfer (form "
+                                    "factor bound) a link between two element clusters may carry; "
+                                    "smaller makes more, finer links (slower, more accurate)",
+                                    "solver", low=1e-5, high=1.0, digits=4)
+    link_memory: int = _option(4096, "Link Memory", "memory budget of the links (MB); a scene that "
+                               "would need more gets coarser links, with a warning", "solver",
+                               low=1, soft_high=65536)
     seed: int = _option(1, "Seed", "random seed of the sample jitter (results are deterministic "
                         "for a seed)", "solver", low=0)
     bake_copy: bool = _option(False, "Bake Copy", "when modifiers change an object's vertex count, "

@@ -73,11 +73,17 @@ def _triangle_area2(s: Surfels, t: int) -> float:
 @wp.func
 def element_ff(s: Surfels, i: int, j: int) -> float:
     """Form factor from element i's point to the front of element j."""
-    p = s.pos[i]
+    return point_ff(s, s.pos[i], s.nrm[i], j)
+
+
+@wp.func
+def point_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int) -> float:
+    """Form factor from point p (unit normal n) to the front of element j: its disk far away, its
+    exact triangles when d² < NEAR·A_j."""
     d = s.pos[j] - p
     if wp.dot(d, d) < NEAR * s.area[j]:
-        return fan_ff(p, s.nrm[i], j, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-    return disk_ff(p, s.nrm[i], s.pos[j], s.nrm[j], s.area[j])
+        return fan_ff(p, n, j, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+    return disk_ff(p, n, s.pos[j], s.nrm[j], s.area[j])
 
 
 @wp.func

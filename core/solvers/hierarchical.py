@@ -1,0 +1,275 @@
+"""Hierarchical radiosity over links between cluster-tree nodes (Hanrahan et al. 1991, with
+clusters; ALGORITHMS.md §4, §9): multi-bounce indirect light in O(links) per iteration.
+
+The links (``core.links``, cached on the problem) join pairs of tree nodes that exchange light as
+wholes, each with its unoccluded transfer and the visibility of a few stratified rays between the
+two nodes' surfaces, traced once. One iteration, in lighting units (irradiance/π) as the
+reference solver's sweep, with D the direct lighting from ``core.direct``:
+
+- pull: each node's radiance is the area-weighted mean of ρ ⊙ (D + I) over its leaves;
+- gather: each node receives Σ over its links of transfer × visibility × the sender's radiance
+  (one thread per receiver node over its CSR range, no atomics);
+- push: an element's indirect lighting I is the sum of what the nodes on its root path received
+  (irradiance pushed down unchanged).
+
+Iterations repeat until the largest change is below ``tolerance`` × the largest lighting value
+(Jacobi, as the reference), at most ``bounces``.
+
+At receivers that are not the elements (lightmap texels) ``evaluate`` runs a final gather of the
+converged radiance over the tree with ray visibility: per texel, a stackless traversal
+(``core.traversal``) takes each node whose transfer estimate from the texel is below the link
+threshold (blended over ±10 % around it, so the cut leaves no steps), its transfer (the exact
+triangles of a near leaf) and the unblocked fraction of rays from the texel to stratified points
+on the node's surface. Small occluders therefore cast sharp indirect shadows between vertices.
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .. import device as device_mod
+from .. import links as links_mod
+from ..hierarchy import Nodes, node_means
+from ..links import LinkSet, Sampling, centroid_ff, leaf_point, pair_need, sample_leaf
+from ..problem import Surfels
+from ..rays import lift, visible
+from ..traversal import cut_advance, cut_begin, cut_skip, cut_weight
+from .base import Solution
+from .reference import point_ff
+
+
+
+def oracle(settings) -> links_mod.Oracle:
+    """The links this solver asks for: the settings' threshold, rays and budget, weighted by the
+    first estimate of the radiance (``first_radiance``)."""
+    return links_mod.Oracle(threshold=float(settings.link_threshold), rays=int(settings.visibility_rays),
+                            seed=int(settings.seed), budget=int(settings.link_memory) << 20,
+                            brightness="first estimate")
+
+
+def first_radiance(problem) -> np.ndarray:
+    """float32[n,3]: a first estimate of each element's radiance before solving, ρ ⊙ (D + ī):
+    the direct lighting D plus a uniform indirect lighting ī = ρ̄ D̄ / (1 − ρ̄) (area means; what a
+    closed room of uniform albedo reflects, an overestimate for open scenes, so refinement errs
+    on the fine side)."""
+    els = problem.elements
+    area = els.area.astype(np.float64)[:, None]
+    total = max(float(area.sum()), 1e-30)
+    albedo = (els.albedo * area).sum(axis=0) / total
+    reflected = (els.albedo * problem.direct * area).sum(axis=0) / total
+    indirect = reflected / np.maximum(1.0 - albedo, 0.05)
+    return (els.albedo * (problem.direct + indirect)).astype(np.float32)
+
+
+def links_of(problem):
+    """The problem's links for this solver (built once, cached)."""
+    return problem.links(oracle(problem.settings), lambda: first_radiance(problem))
+
+
+@wp.kernel
+def _exitance_kernel(offset: int, albedo: wp.array(dtype=wp.vec3), direct: wp.array(dtype=wp.vec3),
+                     indirect: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    e = wp.tid() + offset
+    out[e] = wp.cw_mul(albedo[e], direct[e] + indirect[e])
+
+
+@wp.kernel
+def _gather_kernel(offset: int, ls: LinkSet, radiance: wp.array(dtype=wp.vec3),
+                   out: wp.array(dtype=wp.vec3)):
+    """What receiver node r gets over its links: Σ F · visibility · radiance of the sender."""
+    r = wp.tid() + offset
+    acc = wp.vec3(0.0)
+    for j in range(ls.offsets[r], ls.offsets[r + 1]):
+        acc += radiance[ls.sender[j]] * ls.transfer[j]
+    out[r] = acc
+
+
+@wp.kernel
+def _push_kernel(offset: int, t: Nodes, gathered: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    """Leaf k's element: the sum of what its root path received."""
+    k = wp.tid() + offset
+    acc = wp.vec3(0.0)
+    x = k
+    while x >= 0:
+        acc += gathered[x]
+        x = t.parent[x]
+    out[t.element[k]] = acc
+
+
+@wp.kernel
+def _leaf_gather_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3),
+                        evaluations: wp.array(dtype=wp.int32)):
+    """Leaf k's element: what the links of its root path bring, each link's transfer evaluated at
+    the element's own point and normal (the link's visibility kept)."""
+    k = wp.tid() + offset
+    e = t.element[k]
+    p = s.pos[e]
+    n = s.nrm[e]
+    acc = wp.vec3(0.0)
+    count = int(0)
+    x = k
+    while x >= 0:
+        for j in range(ls.offsets[x], ls.offsets[x + 1]):
+            b = ls.sender[j]
+            f = ls.transfer[j]
+            norm = ls.form_factor[j]
+            if x != k and norm > 0.0:
+                f = centroid_ff(t, s, p, n, b) * f / norm
+            acc += radiance[b] * f
+        count += ls.offsets[x + 1] - ls.offsets[x]
+        x = t.parent[x]
+    out[e] = acc
+    evaluations[k] = count
+
+
+class Iteration:
+    """One gather + push over the links of ``problem`` on its device."""
+
+    def __init__(self, problem, links):
+        self.problem, self.links = problem, links
+        tree = problem.tree
+        d = problem.device.name
+        self.radiance = wp.empty(tree.count, dtype=wp.vec3, device=d)
+        self.gathered = wp.empty(tree.count, dtype=wp.vec3, device=d)
+        self.exitance = wp.empty(problem.elements.count, dtype=wp.vec3, device=d)
+
+    def __call__(self, direct: wp.array, indirect: wp.array, out: wp.array) -> None:
+        """out ← push(gather(pull(ρ ⊙ (direct + indirect)))) (vec3[n] device arrays)."""
+        p = self.problem
+        tree, dev = p.tree, p.device
+        device_mod.launch(_exitance_kernel, p.elements.count, [p.surfels.albedo, direct, indirect, self.exitance],
+                          dev)
+        node_means(tree, self.exitance, self.radiance)
+        device_mod.launch(_gather_kernel, tree.count,
+                          [self.links.set, self.radiance, self.gathered], dev)
+        device_mod.launch(_push_kernel, int(tree.level_offsets[1]), [tree.nodes, self.gathered, out], dev)
+
+    def at_leaves(self, direct: wp.array, indirect: wp.array, out: wp.array) -> int:
+        """out ← the same step with each link evaluated at every leaf below its receiver
+        (``_leaf_gather_kernel``); returns the link evaluations made."""
+        p = self.problem
+        tree, dev = p.tree, p.device
+        n = p.elements.count
+        device_mod.launch(_exitance_kernel, n, [p.surfels.albedo, direct, indirect, self.exitance], dev)
+        node_means(tree, self.exitance, self.radiance)
+        evaluations = wp.empty(n, dtype=wp.int32, device=dev.name)
+        device_mod.launch(_leaf_gather_kernel, n, [tree.nodes, p.surfels, self.links.set, self.radiance, out,
+                                                   evaluations], dev)
+        return int(evaluations.numpy().astype(np.int64).sum())
+
+
+def solve(problem) -> Solution:
+    """Indirect lighting per element (float32[n,3], irradiance/π): iterations over the links until
+    the largest change is below ``tolerance`` × the largest lighting value, or ``bounces``."""
+    settings, stages = problem.settings, problem.stages
+    direct = problem.direct
+    links = links_of(problem)
+    d = problem.device.name
+    n = problem.elements.count
+    step = Iteration(problem, links)
+    dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
+    current = wp.zeros(n, dtype=wp.vec3, device=d)
+    nxt = wp.zeros(n, dtype=wp.vec3, device=d)
+    before = np.zeros((n, 3), np.float32)
+    scale_direct = float(np.abs(direct).max(initial=0.0))
+    iterations = 0
+    for iterations in range(1, settings.bounces):
+        step(dev_direct, current, nxt)
+        current, nxt = nxt, current
+        now = current.numpy()
+        change = float(np.abs(now - before).max(initial=0.0))
+        scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
+        before = now
+        stages.report("bounces", iterations / settings.bounces)
+        if change <= settings.tolerance * scale:
+            break
+    evaluations = step.at_leaves(dev_direct, current, nxt)
+    return Solution(nxt.numpy(), {"iterations": iterations + 1, "links": links.count,
+                                  "link_threshold": links.threshold, "leaf_evaluations": evaluations})
+
+
+@wp.kernel
+def _final_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=wp.vec3),
+                         rsize: wp.array(dtype=wp.float32), t: Nodes, s: Surfels,
+                         cone: wp.array(dtype=wp.float32), sm: Sampling, radiance: wp.array(dtype=wp.vec3),
+                         threshold: float, rays: int, seed: int, out: wp.array(dtype=wp.vec3),
+                         visits: wp.array(dtype=wp.int32)):
+    """Receiver i: over the tree cut whose transfer estimates from it are below ``threshold``,
+    each node's radiance × its transfer: a leaf's element form factor × the visibility of its
+    point; a cluster's area × the mean over ``rays`` leaves drawn in proportion to area ×
+    radiance of their form factor per unit area × the visibility of their points."""
+    i = wp.tid() + offset
+    p = rp[i]
+    n = rn[i]
+    origin = lift(p, n, rsize[i])
+    state = wp.rand_init(seed, i)
+    acc = wp.vec3(0.0)
+    count = int(0)
+    cut = cut_begin(t)
+    while cut.node >= 0:
+        node = cut.node
+        count += 1
+        glow = radiance[node]
+        if t.area[node] <= 0.0 or glow[0] + glow[1] + glow[2] <= 0.0:
+            cut = cut_skip(t, cut)
+            continue
+        need = pair_need(p, n, 0.0, 0.0, 0.0, t.position[node], t.normal[node], t.radius[node],
+                         t.area[node], cone[node])
+        if need[2] <= 0.0:
+            cut = cut_skip(t, cut)
+            continue
+        leaf = t.descend[node] < 0
+        take = float(1.0)
+        if not leaf:
+            take = wp.clamp((threshold / wp.max(need[1], 1.0e-30) - 0.9) * 5.0, 0.0, 1.0)
+        if take > 0.0:
+            f = float(0.0)
+            if leaf:
+                f = point_ff(s, p, n, t.element[node]) * visible(s.mesh, origin, leaf_point(t, s, node))
+            else:
+                for k in range(rays):
+                    lq = sample_leaf(t, sm, node, (float(k) + wp.randf(state)) / float(rays))
+                    e = t.element[lq]
+                    f += point_ff(s, p, n, e) / s.area[e] * visible(s.mesh, origin, leaf_point(t, s, lq))
+                f *= t.area[node] / float(rays)
+            acc += glow * (cut_weight(t, cut) * take * f)
+        cut = cut_advance(t, cut, take)
+    out[i] = acc
+    visits[i] = count
+
+
+def final_gather(problem, lighting: np.ndarray, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,
+                 progress=None):
+    """(float32[R,3] lighting, int32[R] nodes visited) that the elements' reflected light ρ ⊙
+    ``lighting`` (float32[n,3], irradiance/π) sends to R points (float32[R,3], m) with unit
+    normals and feature sizes (float32[R], m), with ray visibility."""
+    tree, dev, settings = problem.tree, problem.device, problem.settings
+    d = dev.name
+    count = int(points.shape[0])
+    exitance = (problem.elements.albedo * lighting).astype(np.float32)
+    sm = links_mod.sampling(tree, links_mod.leaf_luminance(tree, exitance))
+    out = wp.empty(count, dtype=wp.vec3, device=d)
+    visits = wp.empty(count, dtype=wp.int32, device=d)
+    device_mod.launch(
+        _final_gather_kernel, count,
+        [wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
+         wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
+         wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
+         tree.nodes, problem.surfels, links_mod.cones(tree), sm, node_means(tree, exitance),
+         float(settings.link_threshold), int(settings.visibility_rays), int(settings.seed) + 104729, out,
+         visits],
+        dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
+    return out.numpy(), visits.numpy()
+
+
+def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
+    """Indirect lighting at ``receivers``: the solution at the vertices; at other points (lightmap
+    texels) the final gather with ray visibility (``texel_indirect`` gather) or the solution
+    interpolated (interpolate)."""
+    values = receivers.reconstruct(solution.values)
+    if receivers.aligned or problem.settings.texel_indirect != "gather" or not len(values):
+        return values
+    stages = problem.stages
+    light, _ = stages.run("texel gather", final_gather, problem, problem.direct + solution.values,
+                          receivers.points, receivers.normals, receivers.sizes, stages.reporter("texel gather"))
+    return light
