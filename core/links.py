@@ -59,12 +59,12 @@ from .rays import lift, visible
 from .solvers.reference import element_ff, fan_sample, pair_hits, point_ff
 
 DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
-# Peak bytes per link (both directions): the pair and its four values while it is made, then two
-# sort keys and values at twice their count, and the CSR entries (sender, form factor, transfer)
-# of both directions.
-BYTES_PER_LINK = 80
+# Peak bytes per link (both directions): the pair and its five values while it is made, then two
+# sort keys and values at twice their count, and the CSR entries (sender, transfer, normaliser,
+# visibility) of both directions.
+BYTES_PER_LINK = 88
 # Bytes per candidate pair in flight: the pair, its decision, counts and values, the next queue.
-BYTES_PER_CANDIDATE = 44
+BYTES_PER_CANDIDATE = 48
 # Brightness weights of the oracle (a node's brightest leaf over the scene's mean radiance) are
 # clamped to [WEIGHT_LOW, WEIGHT_HIGH]; sample leaves are drawn in proportion to area ×
 # (radiance + SAMPLE_FLOOR × the mean), so dim leaves keep some samples.
@@ -110,15 +110,18 @@ class LinkSet:
     offsets: int32[m+1], receiver r's links are offsets[r] … offsets[r+1]−1; sender: int32[E] the
     sending node; transfer: float32[E] the transfer (lighting at the receiver per unit radiance of
     the sender's front) averaged over the receiver, with visibility when traced; form_factor:
-    float32[E] the sender's ``centroid_ff`` averaged over the same receiving points (exact for two
-    leaves): transfer × centroid_ff(at a point of the receiver) / form_factor is the transfer at
-    that point.
+    float32[E] the normaliser: the sender's ``centroid_ff`` averaged over the same receiving
+    points (exact for two leaves), so transfer × centroid_ff(at a point of the receiver) /
+    form_factor is the transfer at that point; visible: uint8[E] the visible fraction of the
+    transfer × 255 (the sampled transfer over its unoccluded value; 255 without visibility):
+    0 < visible < 255 marks a link across a shadow boundary.
     """
 
     offsets: wp.array(dtype=wp.int32)
     sender: wp.array(dtype=wp.int32)
     transfer: wp.array(dtype=wp.float32)
     form_factor: wp.array(dtype=wp.float32)
+    visible: wp.array(dtype=wp.uint8)
 
 
 @dataclass
@@ -154,37 +157,40 @@ class Sampling:
 
 
 @wp.func
-def cos_bound(n: wp.vec3, cone: float, u: wp.vec3, beta: float) -> float:
-    """An upper bound of n'·u' over normals n' within angle ``cone`` of unit n and directions u'
-    within angle ``beta`` of unit u."""
-    a = wp.acos(wp.clamp(wp.dot(n, u), -1.0, 1.0)) - cone - beta
-    if a <= 0.0:
+def cos_bound(n: wp.vec3, cone: wp.vec2, u: wp.vec3, beta: wp.vec2) -> float:
+    """An upper bound of n'·u' over normals n' within a cone of unit n and directions u' within
+    angle β of unit u: the cosine of the angle between n and u less the cone's and β's (1 when
+    that is negative); cone and beta as (cos, sin) of their half-angles, so no trigonometry is
+    needed."""
+    c = cone[0] * beta[0] - cone[1] * beta[1]  # cos and sin of the two half-angles' sum γ
+    g = cone[1] * beta[0] + cone[0] * beta[1]
+    ct = wp.clamp(wp.dot(n, u), -1.0, 1.0)
+    if g < 0.0 or ct >= c:  # γ > π, or the angle to u is within γ
         return 1.0
-    if a >= PI:
-        return -1.0
-    return wp.cos(a)
+    return ct * c + wp.sqrt(1.0 - ct * ct) * g
 
 
 @wp.func
-def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: float, pb: wp.vec3,
-              nb: wp.vec3, rb: float, area_b: float, cone_b: float) -> wp.vec3:
+def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec2, pb: wp.vec3,
+              nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec2) -> wp.vec3:
     """How much nodes a and b — centres p, unit normals n, bounding radii r (m), areas (m²),
-    normal-cone half-angles (rad) — must be refined to exchange light as wholes: (need of a, need
-    of b, 1 if they can exchange light at all else 0).
+    normal cones ((cos, sin) of the half-angle) — must be refined to exchange light as wholes:
+    (need of a, need of b, 1 if they can exchange light at all else 0).
 
     Dropped (0) when the cosines bounded over the cones and the directions between the bounding
     spheres show one side facing away; 1 each when the spheres overlap. Else the need of a is the
     larger of its size as b sees it, A_a·cos·cos / (π d² + A_a) with the bounded cosines and the
     centres' distance d, and its normal spread as a receiver: b's form factor from a without a's
     cosine times 2 sin(cone_a / 2), how far a's leaves' normals may differ from its own. A point
-    (r = 0, area 0, cone 0) as a needs nothing itself."""
+    (r = 0, area 0, cone (1, 0)) as a needs nothing itself."""
     v = pb - pa
     d = wp.length(v)
     gap = d - ra - rb
     if gap <= 0.0:
         return wp.vec3(1.0, 1.0, 1.0)
     u = v / d
-    beta = wp.asin(wp.min((ra + rb) / d, 1.0))
+    sb = (ra + rb) / d
+    beta = wp.vec2(wp.sqrt(1.0 - sb * sb), sb)
     ca = cos_bound(na, cone_a, u, beta)
     cb = cos_bound(nb, cone_b, -u, beta)
     if ca <= 0.0 or cb <= 0.0:
@@ -192,8 +198,8 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: float,
     g2 = PI * d * d
     g_ab = area_b * cb / (g2 + area_b)  # b seen from a, without a's cosine
     g_ba = area_a * ca / (g2 + area_a)
-    need_a = wp.max(g_ba * cb, g_ab * 2.0 * wp.sin(0.5 * cone_a))
-    need_b = wp.max(g_ab * ca, g_ba * 2.0 * wp.sin(0.5 * cone_b))
+    need_a = wp.max(g_ba * cb, g_ab * wp.sqrt(2.0 * wp.max(1.0 - cone_a[0], 0.0)))
+    need_b = wp.max(g_ab * ca, g_ba * wp.sqrt(2.0 * wp.max(1.0 - cone_b[0], 0.0)))
     return wp.vec3(need_a, need_b, 1.0)
 
 
@@ -270,9 +276,9 @@ def element_ray(s: Surfels, i: int, j: int, u0: float, u1: float, u2: float) -> 
 def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: int, visibility: int,
                      seed: int):
     """Link (a, b) from ``rays`` sample pairs (see the module docstring): ((transfer to a, to b,
-    centroid form factor to a, to b), the unweighted visible fraction). The centroid form factors
-    (``centroid_ff`` of the sender from the receiving samples) are averaged over the receiving end
-    by area, as the transfer is."""
+    normaliser to a, to b), (visible fraction of the transfer to a, to b, plain visible fraction
+    of the rays)). The normalisers (``centroid_ff`` of the sender from the receiving samples) are
+    averaged over the receiving end by area, as the transfer is."""
     state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
     shift = int(wp.randf(state) * float(rays))
     w_ab = float(0.0)  # a receives from b: weights, weighted sum, plain sum
@@ -328,8 +334,19 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
     if w_ba > 0.0:
         t_ba = h_ba / w_ba
         u_ba = u_ba / w_ba
-    return wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
-                   _normaliser(u_ba * t.area[a], c_ba / r_b)), seen / float(rays)
+    plain = seen / float(rays)
+    return (wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
+                    _normaliser(u_ba * t.area[a], c_ba / r_b)),
+            wp.vec3(_fraction(t_ab, u_ab, plain), _fraction(t_ba, u_ba, plain), plain))
+
+
+@wp.func
+def _fraction(occluded: float, unoccluded: float, plain: float) -> float:
+    """The visible fraction of a transfer: its sampled value over the unoccluded one (the rays'
+    plain fraction where that is 0)."""
+    if unoccluded > 0.0:
+        return wp.clamp(occluded / unoccluded, 0.0, 1.0)
+    return plain
 
 
 @wp.func
@@ -343,15 +360,18 @@ def _normaliser(unoccluded: float, centroid: float) -> float:
 
 
 @wp.kernel
-def _cone_kernel(offset: int, node0: int, t: Nodes, cone: wp.array(dtype=wp.float32)):
+def _cone_kernel(offset: int, node0: int, t: Nodes, angle: wp.array(dtype=wp.float32),
+                 cone: wp.array(dtype=wp.vec2)):
     """Half-angle of the cone around each node's normal holding its subtree's normals, from its
-    children's (already set; leaves 0)."""
+    children's (already set; leaves 0), and its (cos, sin)."""
     node = node0 + wp.tid() + offset
     n = t.normal[node]
     a = float(0.0)
     for c in range(t.first_child[node], t.child_end[node]):
-        a = wp.max(a, wp.acos(wp.clamp(wp.dot(n, t.normal[c]), -1.0, 1.0)) + cone[c])
-    cone[node] = wp.min(a, PI)
+        a = wp.max(a, wp.acos(wp.clamp(wp.dot(n, t.normal[c]), -1.0, 1.0)) + angle[c])
+    a = wp.min(a, PI)
+    angle[node] = a
+    cone[node] = wp.vec2(wp.cos(a), wp.sin(a))
 
 
 @wp.kernel
@@ -379,20 +399,21 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 
 @wp.kernel
 def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
-                   s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.float32), threshold: float,
+                   s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
                    weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
                    seed: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
                    link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
-                   traced: wp.array(dtype=wp.int64)):
+                   visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int64)):
     """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
-    a link, and a link's (transfer to a, to b, form factor to a, to b); rays traced are counted
-    in ``traced``."""
+    a link, a link's (transfer to a, to b, normaliser to a, to b) and the visible fractions of
+    its transfers; rays traced are counted in ``traced``."""
     i = wp.tid() + offset
     a = qa[i]
     b = qb[i]
     dec = DROP
     count = int(0)
     out = wp.vec4(0.0)
+    seen = wp.vec3(1.0)
     leaf_a = t.descend[a] < 0
     leaf_b = t.descend[b] < 0
     if t.area[a] > 0.0 and t.area[b] > 0.0:
@@ -414,6 +435,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                     v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
                     wp.atomic_add(traced, 0, wp.int64(rays))
                 out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
+                seen = wp.vec3(v, v, v)
         else:
             need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
                              t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b])
@@ -430,7 +452,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                         out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed)
                         if visibility != 0:
                             wp.atomic_add(traced, 0, wp.int64(rays))
-                        split = seen > 0.0 and seen < 1.0 and largest > PARTIAL * threshold
+                        split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
                     else:
                         f_ab = centroid_ff(t, s, t.position[a], t.normal[a], b)
                         f_ba = centroid_ff(t, s, t.position[b], t.normal[b], a)
@@ -450,15 +472,17 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
     out_count[i] = count
     link_count[i] = int(dec == LINK)
     values[i] = out
+    visible_out[i] = wp.vec2(seen[0], seen[1])
 
 
 @wp.kernel
 def _scatter_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
                     decision: wp.array(dtype=wp.int32), out_offset: wp.array(dtype=wp.int32),
                     link_offset: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
-                    next_a: wp.array(dtype=wp.int32), next_b: wp.array(dtype=wp.int32),
-                    la: wp.array(dtype=wp.int32), lb: wp.array(dtype=wp.int32),
-                    lvalues: wp.array(dtype=wp.vec4)):
+                    visible_in: wp.array(dtype=wp.vec2), next_a: wp.array(dtype=wp.int32),
+                    next_b: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
+                    lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
+                    lvisible: wp.array(dtype=wp.vec2)):
     """Write candidate i's link, or its pairs of the next queue, at its scanned offsets."""
     i = wp.tid() + offset
     a = qa[i]
@@ -470,6 +494,7 @@ def _scatter_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtyp
         la[j] = a
         lb[j] = b
         lvalues[j] = values[i]
+        lvisible[j] = visible_in[i]
     elif dec == SPLIT_A:
         r = children(t, a)
         for c in range(r[0], r[1]):
@@ -505,7 +530,7 @@ def _directed_kernel(offset: int, la: wp.array(dtype=wp.int32), lb: wp.array(dty
 @wp.kernel
 def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
                 values: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32), lb: wp.array(dtype=wp.int32),
-                lvalues: wp.array(dtype=wp.vec4), out: LinkSet):
+                lvalues: wp.array(dtype=wp.vec4), lvisible: wp.array(dtype=wp.vec2), out: LinkSet):
     """Sorted directed link j: its sender, transfer and form factor; row starts where the
     receiver changes."""
     j = wp.tid() + offset
@@ -520,6 +545,7 @@ def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
         out.sender[j] = la[i]
         out.transfer[j] = x[1]
         out.form_factor[j] = x[3]
+    out.visible[j] = wp.uint8(wp.int32(lvisible[i][v % 2] * 255.0 + 0.5))
     r = keys[j]
     prev = int(-1)
     if j > 0:
@@ -532,13 +558,14 @@ def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
 
 
 def cones(tree) -> wp.array:
-    """float32[m]: each node's normal-cone half-angle (rad) over its subtree (leaves 0), one launch
-    per level."""
+    """vec2[m]: (cos, sin) of each node's normal-cone half-angle over its subtree (leaves (1, 0)),
+    one launch per level."""
     dev = tree.device
-    cone = wp.zeros(tree.count, dtype=wp.float32, device=dev.name)
+    angle = wp.zeros(tree.count, dtype=wp.float32, device=dev.name)
+    cone = wp.full(tree.count, wp.vec2(1.0, 0.0), dtype=wp.vec2, device=dev.name)
     offs = tree.level_offsets
     for lv in range(1, len(offs) - 1):
-        device_mod.launch(_cone_kernel, int(offs[lv + 1] - offs[lv]), [int(offs[lv]), tree.nodes, cone], dev)
+        device_mod.launch(_cone_kernel, int(offs[lv + 1] - offs[lv]), [int(offs[lv]), tree.nodes, angle, cone], dev)
     return cone
 
 
@@ -600,8 +627,9 @@ def _canonical_root(tree) -> int:
 
 
 def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, traced: wp.array):
-    """One top-down build at ``threshold``: the unordered links (int32 a, b and vec4 values, device
-    arrays) and the rounds taken, or None when the budget was exceeded on the way."""
+    """One top-down build at ``threshold``: the unordered links (int32 a, b, vec4 values, vec2
+    visible fractions: device arrays) and the rounds taken, or None when the budget was exceeded
+    on the way."""
     tree, dev, stages = problem.tree, problem.device, problem.stages
     d = dev.name
     t = tree.nodes
@@ -619,10 +647,11 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         q = qa.size
         decision, out_count, link_count = (wp.empty(q, dtype=wp.int32, device=d) for _ in range(3))
         values = wp.empty(q, dtype=wp.vec4, device=d)
+        seen = wp.empty(q, dtype=wp.vec2, device=d)
         device_mod.launch(_oracle_kernel, q,
                           [qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
                            int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, decision,
-                           out_count, link_count, values, traced],
+                           out_count, link_count, values, seen, traced],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
         out_offset = wp.empty(q, dtype=wp.int32, device=d)
         link_offset = wp.empty(q, dtype=wp.int32, device=d)
@@ -635,12 +664,13 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
             return None
         next_a, next_b, la, lb = (wp.empty(k, dtype=wp.int32, device=d) for k in (n_next, n_next, n_links, n_links))
         lvalues = wp.empty(n_links, dtype=wp.vec4, device=d)
-        device_mod.launch(_scatter_kernel, q, [qa, qb, t, decision, out_offset, link_offset, values,
-                                               next_a, next_b, la, lb, lvalues], dev)
+        lvisible = wp.empty(n_links, dtype=wp.vec2, device=d)
+        device_mod.launch(_scatter_kernel, q, [qa, qb, t, decision, out_offset, link_offset, values, seen,
+                                               next_a, next_b, la, lb, lvalues, lvisible], dev)
         if n_links:
-            parts.append((la, lb, lvalues))
+            parts.append((la, lb, lvalues, lvisible))
         qa, qb = next_a, next_b
-    out = [wp.empty(total, dtype=dt, device=d) for dt in (wp.int32, wp.int32, wp.vec4)]
+    out = [wp.empty(total, dtype=dt, device=d) for dt in (wp.int32, wp.int32, wp.vec4, wp.vec2)]
     start = 0
     for part in parts:
         for dst, src in zip(out, part):
@@ -671,7 +701,7 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
                             f"budget of {oracle.budget / 2**20:.0f} MB even at the coarsest "
                             f"threshold: raise the link memory (--link-memory)")
         threshold = min(threshold * RAISE, COARSEST)
-    la, lb, lvalues, rounds = made
+    la, lb, lvalues, lvisible, rounds = made
     pairs = la.size
     if threshold > oracle.threshold:
         stages.warn(f"the links did not fit the link budget of {oracle.budget / 2**20:.0f} MB at "
@@ -689,7 +719,8 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     out.sender = wp.empty(max(count, 1), dtype=wp.int32, device=d)
     out.transfer = wp.empty(max(count, 1), dtype=wp.float32, device=d)
     out.form_factor = wp.empty(max(count, 1), dtype=wp.float32, device=d)
-    device_mod.launch(_csr_kernel, count, [count, n, keys, values, la, lb, lvalues, out], dev)
+    out.visible = wp.empty(max(count, 1), dtype=wp.uint8, device=d)
+    device_mod.launch(_csr_kernel, count, [count, n, keys, values, la, lb, lvalues, lvisible, out], dev)
     if dev.is_cuda:
         wp.synchronize_device(d)
     return Links(set=out, pairs=pairs, threshold=threshold, rounds=rounds,

@@ -122,7 +122,7 @@ class Settings:
     max_pairs: int = _option(16_000_000, "Max Pairs", "memory budget of the all-pairs transport, "
                              "in element pairs at 4 bytes each (the visibility alone takes 1 "
                              "byte a pair)", "solver", low=1)
-    link_threshold: float = _option(0.01, "Link Threshold", "largest unoccluded transfer (form "
+    link_threshold: float = _option(0.1, "Link Threshold", "largest unoccluded transfer (form "
                                     "factor bound) a link between two element clusters may carry; "
                                     "smaller makes more, finer links (slower, more accurate)",
                                     "solver", low=1e-5, high=1.0, digits=4)

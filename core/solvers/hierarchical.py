@@ -30,12 +30,11 @@ import warp as wp
 from .. import device as device_mod
 from .. import links as links_mod
 from ..hierarchy import Nodes, node_means
-from ..links import LinkSet, Sampling, centroid_ff, leaf_point, pair_need, sample_leaf
+from ..links import LinkSet, Sampling, centroid_ff, leaf_point, sample_leaf
 from ..problem import Surfels
 from ..rays import lift, visible
-from ..traversal import cut_advance, cut_begin, cut_skip, cut_weight
 from .base import Solution
-from .reference import point_ff
+from .reference import fan_sample, point_ff
 
 
 
@@ -148,14 +147,32 @@ class Iteration:
         """out ← the same step with each link evaluated at every leaf below its receiver
         (``_leaf_gather_kernel``); returns the link evaluations made."""
         p = self.problem
-        tree, dev = p.tree, p.device
-        n = p.elements.count
-        device_mod.launch(_exitance_kernel, n, [p.surfels.albedo, direct, indirect, self.exitance], dev)
-        node_means(tree, self.exitance, self.radiance)
-        evaluations = wp.empty(n, dtype=wp.int32, device=dev.name)
-        device_mod.launch(_leaf_gather_kernel, n, [tree.nodes, p.surfels, self.links.set, self.radiance, out,
-                                                   evaluations], dev)
-        return int(evaluations.numpy().astype(np.int64).sum())
+        device_mod.launch(_exitance_kernel, p.elements.count, [p.surfels.albedo, direct, indirect, self.exitance],
+                          p.device)
+        return _leaf_gather(p, self.links, self.exitance, self.radiance, out)
+
+
+def _leaf_gather(problem, links, exitance: wp.array, radiance: wp.array, out: wp.array) -> int:
+    """out (vec3[n]) ← the leaf gather of ``exitance`` (vec3[n], ρ ⊙ lighting per element) over
+    ``links``, ``radiance`` (vec3[m]) the node means it fills; returns the link evaluations."""
+    tree, dev = problem.tree, problem.device
+    n = problem.elements.count
+    node_means(tree, exitance, radiance)
+    evaluations = wp.empty(n, dtype=wp.int32, device=dev.name)
+    device_mod.launch(_leaf_gather_kernel, n, [tree.nodes, problem.surfels, links.set, radiance, out, evaluations],
+                      dev)
+    return int(evaluations.numpy().astype(np.int64).sum())
+
+
+def leaf_gather(problem, links, exitance: np.ndarray) -> np.ndarray:
+    """float32[n,3]: the lighting (irradiance/π) each element receives over ``links`` from the
+    elements' ``exitance`` (float32[n,3], the radiance ρ ⊙ lighting leaving their fronts), each
+    link evaluated at the receiving element (what the solver's last step does)."""
+    d = problem.device.name
+    out = wp.empty(problem.elements.count, dtype=wp.vec3, device=d)
+    _leaf_gather(problem, links, wp.array(np.ascontiguousarray(exitance, np.float32), dtype=wp.vec3, device=d),
+                 wp.empty(problem.tree.count, dtype=wp.vec3, device=d), out)
+    return out.numpy()
 
 
 def solve(problem) -> Solution:
@@ -189,15 +206,16 @@ def solve(problem) -> Solution:
 
 
 @wp.kernel
-def _final_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=wp.vec3),
-                         rsize: wp.array(dtype=wp.float32), t: Nodes, s: Surfels,
-                         cone: wp.array(dtype=wp.float32), sm: Sampling, radiance: wp.array(dtype=wp.vec3),
-                         threshold: float, rays: int, seed: int, out: wp.array(dtype=wp.vec3),
-                         visits: wp.array(dtype=wp.int32)):
-    """Receiver i: over the tree cut whose transfer estimates from it are below ``threshold``,
-    each node's radiance × its transfer: a leaf's element form factor × the visibility of its
-    point; a cluster's area × the mean over ``rays`` leaves drawn in proportion to area ×
-    radiance of their form factor per unit area × the visibility of their points."""
+def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=wp.vec3),
+                         rsize: wp.array(dtype=wp.float32), corners: wp.array2d(dtype=wp.int32),
+                         weights: wp.array2d(dtype=wp.float32), leaf_of: wp.array(dtype=wp.int32), t: Nodes,
+                         s: Surfels, ls: LinkSet, sm: Sampling, radiance: wp.array(dtype=wp.vec3), rays: int,
+                         seed: int, out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int64)):
+    """Receiver i (a texel): for each element it is reconstructed from (weights), what the links of
+    that element's root path bring to the texel's point and normal — the links' transfer scaled
+    by the sender's ``centroid_ff`` from the texel over the link's normaliser; the element's own
+    links to leaves exactly, with a ray to each; links its rays found partly visible with the
+    visible fraction of ``rays`` rays from the texel to points drawn on the sender by radiance."""
     i = wp.tid() + offset
     p = rp[i]
     n = rn[i]
@@ -205,71 +223,78 @@ def _final_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
     state = wp.rand_init(seed, i)
     acc = wp.vec3(0.0)
     count = int(0)
-    cut = cut_begin(t)
-    while cut.node >= 0:
-        node = cut.node
-        count += 1
-        glow = radiance[node]
-        if t.area[node] <= 0.0 or glow[0] + glow[1] + glow[2] <= 0.0:
-            cut = cut_skip(t, cut)
+    for c in range(corners.shape[1]):
+        w = weights[i, c]
+        if w <= 0.0:
             continue
-        need = pair_need(p, n, 0.0, 0.0, 0.0, t.position[node], t.normal[node], t.radius[node],
-                         t.area[node], cone[node])
-        if need[2] <= 0.0:
-            cut = cut_skip(t, cut)
-            continue
-        leaf = t.descend[node] < 0
-        take = float(1.0)
-        if not leaf:
-            take = wp.clamp((threshold / wp.max(need[1], 1.0e-30) - 0.9) * 5.0, 0.0, 1.0)
-        if take > 0.0:
-            f = float(0.0)
-            if leaf:
-                f = point_ff(s, p, n, t.element[node]) * visible(s.mesh, origin, leaf_point(t, s, node))
-            else:
-                for k in range(rays):
-                    lq = sample_leaf(t, sm, node, (float(k) + wp.randf(state)) / float(rays))
-                    e = t.element[lq]
-                    f += point_ff(s, p, n, e) / s.area[e] * visible(s.mesh, origin, leaf_point(t, s, lq))
-                f *= t.area[node] / float(rays)
-            acc += glow * (cut_weight(t, cut) * take * f)
-        cut = cut_advance(t, cut, take)
+        k = leaf_of[corners[i, c]]
+        x = k
+        while x >= 0:
+            for j in range(ls.offsets[x], ls.offsets[x + 1]):
+                b = ls.sender[j]
+                glow = radiance[b]
+                if glow[0] + glow[1] + glow[2] <= 0.0:
+                    continue
+                f = float(0.0)
+                if x == k and t.descend[b] < 0:
+                    f = point_ff(s, p, n, t.element[b]) * visible(s.mesh, origin, leaf_point(t, s, b))
+                    count += 1
+                else:
+                    f = ls.transfer[j]
+                    norm = ls.form_factor[j]
+                    if norm > 0.0:
+                        f = centroid_ff(t, s, p, n, b) * f / norm
+                    seen = int(ls.visible[j])
+                    if seen > 0 and seen < 255 and f > 0.0:
+                        h = float(0.0)
+                        for r in range(rays):
+                            e = t.element[sample_leaf(t, sm, b, (float(r) + wp.randf(state)) / float(rays))]
+                            q = fan_sample(s, e, wp.randf(state), wp.randf(state), wp.randf(state))
+                            h += visible(s.mesh, origin, lift(q, s.nrm[e], wp.sqrt(s.area[e])))
+                        f *= h / float(rays) * 255.0 / float(seen)  # the texel's visible fraction for the link's
+                        count += rays
+                acc += glow * (w * f)
+            x = t.parent[x]
     out[i] = acc
-    visits[i] = count
+    wp.atomic_add(traced, 0, wp.int64(count))
 
 
-def final_gather(problem, lighting: np.ndarray, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,
-                 progress=None):
-    """(float32[R,3] lighting, int32[R] nodes visited) that the elements' reflected light ρ ⊙
-    ``lighting`` (float32[n,3], irradiance/π) sends to R points (float32[R,3], m) with unit
-    normals and feature sizes (float32[R], m), with ray visibility."""
+def texel_gather(problem, links, lighting: np.ndarray, receivers, progress=None):
+    """(float32[R,3] indirect lighting, rays traced) at ``receivers`` (``core.receivers``) from the
+    elements' reflected light ρ ⊙ ``lighting`` (float32[n,3], irradiance/π) over ``links``."""
     tree, dev, settings = problem.tree, problem.device, problem.settings
     d = dev.name
-    count = int(points.shape[0])
+    count = len(receivers)
     exitance = (problem.elements.albedo * lighting).astype(np.float32)
     sm = links_mod.sampling(tree, links_mod.leaf_luminance(tree, exitance))
+    leaf_of = np.empty(problem.elements.count, np.int32)
+    leaf_of[tree.order.numpy()] = np.arange(problem.elements.count, dtype=np.int32)
     out = wp.empty(count, dtype=wp.vec3, device=d)
-    visits = wp.empty(count, dtype=wp.int32, device=d)
+    traced = wp.zeros(1, dtype=wp.int64, device=d)
+
+    def arr(x, dtype):
+        return wp.array(np.ascontiguousarray(x), dtype=dtype, device=d)
+
     device_mod.launch(
-        _final_gather_kernel, count,
-        [wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
-         wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
-         wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
-         tree.nodes, problem.surfels, links_mod.cones(tree), sm, node_means(tree, exitance),
-         float(settings.link_threshold), int(settings.visibility_rays), int(settings.seed) + 104729, out,
-         visits],
+        _texel_gather_kernel, count,
+        [arr(receivers.points.astype(np.float32), wp.vec3), arr(receivers.normals.astype(np.float32), wp.vec3),
+         arr(receivers.sizes.astype(np.float32), wp.float32), arr(receivers.elements.astype(np.int32), wp.int32),
+         arr(receivers.weights.astype(np.float32), wp.float32), arr(leaf_of, wp.int32), tree.nodes,
+         problem.surfels, links.set, sm, node_means(tree, exitance), int(settings.visibility_rays),
+         int(settings.seed) + 104729, out, traced],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
-    return out.numpy(), visits.numpy()
+    return out.numpy(), int(traced.numpy()[0])
 
 
 def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
     """Indirect lighting at ``receivers``: the solution at the vertices; at other points (lightmap
-    texels) the final gather with ray visibility (``texel_indirect`` gather) or the solution
-    interpolated (interpolate)."""
+    texels) the final gather over the links with ray visibility (``texel_indirect`` gather) or the
+    solution interpolated (interpolate)."""
     values = receivers.reconstruct(solution.values)
     if receivers.aligned or problem.settings.texel_indirect != "gather" or not len(values):
         return values
     stages = problem.stages
-    light, _ = stages.run("texel gather", final_gather, problem, problem.direct + solution.values,
-                          receivers.points, receivers.normals, receivers.sizes, stages.reporter("texel gather"))
+    light, rays = stages.run("texel gather", texel_gather, problem, links_of(problem),
+                             problem.direct + solution.values, receivers, stages.reporter("texel gather"))
+    problem.counts["rays"] += rays
     return light
