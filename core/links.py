@@ -70,11 +70,15 @@ BYTES_PER_CANDIDATE = 48
 # (radiance + SAMPLE_FLOOR × the mean), so dim leaves keep some samples.
 WEIGHT_LOW, WEIGHT_HIGH = 0.25, 4.0
 SAMPLE_FLOOR = 0.25
+# The normal-spread term of a receiver's need is weighted by this: a cluster folded round a corner
+# receives one value for leaves that see a sender very differently, and its per-leaf correction
+# rests on a few samples, so such clusters are split sooner than flat ones.
+CONE_WEIGHT = 4.0
 # A partly visible link is split while its estimate exceeds this fraction of the threshold.
 PARTIAL = 0.25
 # The largest ratio of a link's sampled unoccluded transfer over its centroid form factor that a
 # single receiving point keeps (see _normaliser).
-JENSEN = 1.5
+JENSEN = 1.2
 # Each try over the budget multiplies the threshold by this.
 RAISE = 2.0
 # No estimate of pair_need exceeds this: at this threshold every pair of distinct nodes links.
@@ -181,7 +185,8 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     spheres show one side facing away; 1 each when the spheres overlap. Else the need of a is the
     larger of its size as b sees it, A_a·cos·cos / (π d² + A_a) with the bounded cosines and the
     centres' distance d, and its normal spread as a receiver: b's form factor from a without a's
-    cosine times 2 sin(cone_a / 2), how far a's leaves' normals may differ from its own. A point
+    cosine times 2 sin(cone_a / 2) — how far a's leaves' normals may differ from its own — times
+    CONE_WEIGHT. A point
     (r = 0, area 0, cone (1, 0)) as a needs nothing itself."""
     v = pb - pa
     d = wp.length(v)
@@ -198,8 +203,8 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     g2 = PI * d * d
     g_ab = area_b * cb / (g2 + area_b)  # b seen from a, without a's cosine
     g_ba = area_a * ca / (g2 + area_a)
-    need_a = wp.max(g_ba * cb, g_ab * wp.sqrt(2.0 * wp.max(1.0 - cone_a[0], 0.0)))
-    need_b = wp.max(g_ab * ca, g_ba * wp.sqrt(2.0 * wp.max(1.0 - cone_b[0], 0.0)))
+    need_a = wp.max(g_ba * cb, g_ab * CONE_WEIGHT * wp.sqrt(2.0 * wp.max(1.0 - cone_a[0], 0.0)))
+    need_b = wp.max(g_ab * ca, g_ba * CONE_WEIGHT * wp.sqrt(2.0 * wp.max(1.0 - cone_b[0], 0.0)))
     return wp.vec3(need_a, need_b, 1.0)
 
 

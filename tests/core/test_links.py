@@ -115,7 +115,7 @@ def test_transfer_over_a_receivers_links_adds_up_to_its_unoccluded_form_factors(
 
 def test_link_count_grows_about_linearly_with_the_elements():
     """Four sizes of a box room holding a cube (geometric oracle): links ∝ elements^α with α
-    measured 0.91, 0.83, 0.83 (34.9 k, 112 k, 335 k, 1.04 M links for 540, 1 950, 7 260, 28 254
+    measured 0.91, 0.82, 0.79 (46.2 k, 148 k, 434 k, 1.28 M links for 540, 1 950, 7 260, 28 254
     elements): the near field of an element is a fixed number of leaves, each coarser level adds
     about as many links per node, and small scenes are all near field."""
     counts = []
