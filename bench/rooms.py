@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from radiosity_baker.core.scene import LAMP_AREA, LAMP_POINT, Lamps, SceneData
+from radiosity_baker.core.scene import LAMP_AREA, LAMP_POINT, LAMP_SUN, Lamps, SceneData
 
 # (centre x, y, z, size x, y, z, albedo rgb) of the furniture, metres
 FURNITURE = [
@@ -88,3 +88,13 @@ def room(elements: int) -> SceneData:
                      tri_object=np.concatenate(obj), albedo=np.concatenate(alb),
                      emission=np.zeros((len(t_all), 3), np.float32), lamps=lamps,
                      object_names=[f"part{k}" for k in range(len(parts))])
+
+
+def sun(direction, strength: float) -> Lamps:
+    """One sun shining along ``direction`` with ``strength`` (W/m²)."""
+    d = np.asarray(direction, np.float32)
+    return Lamps(kind=np.array([LAMP_SUN], np.int32), position=np.zeros((1, 3), np.float32),
+                 direction=(d / np.linalg.norm(d))[None], axis_u=np.array([[1, 0, 0]], np.float32),
+                 axis_v=np.array([[0, 1, 0]], np.float32), size=np.zeros((1, 2), np.float32),
+                 shape=np.zeros(1, np.int32), power=np.full((1, 3), strength, np.float32),
+                 spot_size=np.zeros(1, np.float32), spot_blend=np.zeros(1, np.float32), names=["Sun"])

@@ -9,6 +9,7 @@ and how).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from typing import Optional
 
@@ -98,7 +99,7 @@ def _option(default, label, help, group, **kwargs):
 class Settings:
     """Bake settings; see each field's Option (``option(name)``) for its meaning and range."""
 
-    method: str = _option("reference", "Method", "how light transport is computed", "solver",
+    method: str = _option("hierarchical", "Method", "how light transport is computed", "solver",
                           choices=METHODS)
     content: str = _option("lighting", "Content", "which quantity is baked", "output",
                            choices=CONTENTS)
@@ -111,8 +112,9 @@ class Settings:
     light_samples: int = _option(16, "Light Samples", "shadow samples per lamp / emissive triangle "
                                  "and receiver (softer, less noisy shadows)", "solver", low=1,
                                  soft_high=256, flag="--samples")
-    visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair for the "
-                                   "visibility of indirect light", "solver", low=1, high=255,
+    visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair (reference) or "
+                                   "link (hierarchical) for the visibility of indirect light",
+                                   "solver", low=1, high=255,
                                    soft_high=64, flag="--rays")
     bounces: int = _option(64, "Bounces", "at most this many indirect bounces (sweeps)", "solver",
                            low=1, soft_high=128)
@@ -196,7 +198,7 @@ class Settings:
         """Settings changed from their defaults that the chosen solver does not read (for a
         warning: a bunnell bake ignores --bounces)."""
         return [f.name for f in fields(self)
-                if getattr(self, f.name) != f.default and not reads(self.solver, f.name)]
+                if not _same(getattr(self, f.name), f.default) and not reads(self.solver, f.name)]
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -204,6 +206,13 @@ class Settings:
     def group(self, name: str) -> dict:
         """{field: value} of the settings read by ``name`` (one of GROUPS)."""
         return {f.name: getattr(self, f.name) for f in fields(self) if option(f.name).group == name}
+
+
+def _same(value, default) -> bool:
+    """A setting left at its default; floats to single precision (Blender's float properties)."""
+    if isinstance(default, float) and isinstance(value, float):
+        return math.isclose(value, default, rel_tol=1e-6, abs_tol=1e-12)
+    return value == default
 
 
 def option(name: str) -> Option:
