@@ -13,12 +13,11 @@ For each size:
   al.'s antiradiance link creation, 50 M links/s on a GTX 260): seconds, links (directed: each
   link of a pair of nodes counts once per direction, as the gather reads them) and links/s, the
   best of ``--repeat`` runs;
-- ``links``: the links the solver builds (brightness-weighted oracle, 4 visibility samples per
-  link): seconds, links, rays;
-- ``iteration``: seconds per gather + push over those links (the mean of the solve's
-  iterations) and the final gather at the elements;
 - ``bake``: ``pipeline.bake`` end to end (elements, direct light, tree, links, solve) — wall
-  seconds, peak memory.
+  seconds, peak memory, seconds per stage; within it ``links``, the links the solver builds
+  (brightness-weighted oracle, 4 visibility samples per link: seconds, links, rays of the whole
+  bake in ``rays``) and ``iteration``, seconds per gather + push over them (median) and of the
+  final gather at the elements.
 
 The deforming mesh is the hilly terrain of ``bench/ao_bench.py`` (hills moving each frame) under a
 sun: per frame ``Problem.move`` (BVH and tree refitted) and the links made again from scratch.
@@ -68,35 +67,35 @@ def best(fn, repeat):
 
 def size_row(size: int, settings: Settings, repeat: int) -> dict:
     scene = room(size)
-    marks_of = {}
-    problem = Problem(scene, settings, Stages(lambda stage, f: marks_of.setdefault(stage, []).append(time.perf_counter())))
-    problem.direct, problem.tree  # noqa: B018  (made before the timings)
+    problem = Problem(scene, settings)
+    problem.tree  # noqa: B018  (made before the timings)
     geometric = links.Oracle(threshold=settings.link_threshold, rays=0, visibility=False,
                              budget=settings.link_memory << 20)
     seconds, made = best(lambda: links.build(problem, geometric), repeat)
     row = {"elements": problem.elements.count, "triangles": scene.num_triangles, "nodes": problem.tree.count,
            "create": {"seconds": round(seconds, 3), "links": made.count, "rounds": made.rounds,
                       "links_per_second": round(made.count / seconds)}}
-    del made
+    del made, problem
+    marks = {}
+
+    def progress(stage, fraction):
+        marks.setdefault(stage, []).append(time.perf_counter())
+
     t0 = time.perf_counter()
-    solver_links = hierarchical.links_of(problem)
-    row["links"] = {"seconds": round(time.perf_counter() - t0, 3), "links": solver_links.count,
-                    "links_per_element": round(solver_links.count / problem.elements.count, 1),
-                    "rays": solver_links.rays_traced, "threshold": solver_links.threshold}
-    t0 = time.perf_counter()
-    solution = hierarchical.solve(problem)
-    solve = time.perf_counter() - t0
-    marks = np.array(marks_of.get("bounces", [t0]))  # the solve reports after each iteration
-    iterations = solution.counts["iterations"] - 1  # node-level ones; the last is the final gather
-    per_iteration = float(np.median(np.diff(np.concatenate([[t0], marks])))) if iterations else 0.0
-    row["iteration"] = {"seconds": round(per_iteration, 4), "iterations": iterations,
-                        "final_gather_seconds": round(solve - (marks[-1] - t0), 3),
-                        "leaf_evaluations": solution.counts["leaf_evaluations"]}
-    del problem, solver_links, solution
-    t0 = time.perf_counter()
-    result = bake(scene, settings)
-    row["bake"] = {"seconds": round(time.perf_counter() - t0, 2), "peak_memory_mb": round(result.peak_memory_bytes / 2**20),
+    result = bake(scene, settings, progress=progress)
+    row["bake"] = {"seconds": round(time.perf_counter() - t0, 2),
+                   "peak_memory_mb": round(result.peak_memory_bytes / 2**20),
                    "stages": {k: round(v, 2) for k, v in result.timings.items()}, "warnings": result.warnings}
+    c = result.counts
+    row["links"] = {"seconds": round(result.timings["links"], 3), "links": c["links"],
+                    "links_per_element": round(c["links"] / c["elements"], 1), "threshold": c["link_threshold"]}
+    # iterations: from the links' end to each "bounces" report; the final gather from the last one
+    # to the solve's end
+    steps = np.diff([marks["links"][-1], *marks["bounces"]])
+    row["iteration"] = {"seconds": round(float(np.median(steps)), 4), "iterations": len(steps),
+                        "final_gather_seconds": round(marks["solve"][-1] - marks["bounces"][-1], 3),
+                        "leaf_evaluations": c["leaf_evaluations"]}
+    row["rays"] = c["rays"]
     print(row, flush=True)
     return row
 
