@@ -37,9 +37,10 @@ Finally both directions are sorted by receiver (``wp.utils.radix_sort_pairs``) i
 
 Memory: the links and candidates in flight are held to ``budget`` bytes (BYTES_PER_LINK per link
 at the peak, while sorting; BYTES_PER_CANDIDATE per queued pair). A scene that would exceed it is
-rebuilt with the threshold raised (×RAISE per try) and a warning says how many links were made and
-at what threshold; only when even the coarsest links (threshold ≥ COARSEST: every pair links at
-first sight) do not fit does the bake stop with a message.
+rebuilt with the threshold raised (×RAISE per try, found by trial builds without rays) and a
+warning says how many links were made and at what threshold; only when even the coarsest links
+(threshold ≥ COARSEST: every pair links at first sight) do not fit does the bake stop with a
+message.
 """
 from __future__ import annotations
 
@@ -79,8 +80,10 @@ PARTIAL = 0.25
 # The largest ratio of a link's sampled unoccluded transfer over its centroid form factor that a
 # single receiving point keeps (see _normaliser).
 JENSEN = 1.2
-# Each try over the budget multiplies the threshold by this.
+# Each try over the budget multiplies the threshold by this; the trial builds that find the
+# threshold (no rays) must fit the budget over this margin.
 RAISE = 2.0
+TRIAL_MARGIN = 1.5
 # No estimate of pair_need exceeds this: at this threshold every pair of distinct nodes links.
 COARSEST = 2.0
 PI = math.pi
@@ -697,15 +700,19 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     sm = sampling(tree, lum, SAMPLE_FLOOR)
     threshold = float(oracle.threshold)
     traced = wp.zeros(1, dtype=wp.int64, device=d)
-    while True:
-        made = _create(problem, oracle, threshold, sm, weight, traced)
-        if made is not None:
-            break
+    # Over the budget, the threshold is raised in trial builds without rays (cheap; the links a
+    # partial visibility splits need a margin), then the links are made for real.
+    trial = Oracle(threshold, rays=0, visibility=False, budget=int(oracle.budget / TRIAL_MARGIN))
+    made = _create(problem, oracle, threshold, sm, weight, traced)
+    while made is None:
         if threshold >= COARSEST:
             raise BakeError(f"the links of {problem.elements.count} elements do not fit the link "
                             f"budget of {oracle.budget / 2**20:.0f} MB even at the coarsest "
                             f"threshold: raise the link memory (--link-memory)")
         threshold = min(threshold * RAISE, COARSEST)
+        if threshold < COARSEST and _create(problem, trial, threshold, sm, weight, traced) is None:
+            continue
+        made = _create(problem, oracle, threshold, sm, weight, traced)
     la, lb, lvalues, lvisible, rounds = made
     pairs = la.size
     if threshold > oracle.threshold:

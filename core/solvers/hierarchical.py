@@ -36,7 +36,7 @@ from ..hierarchy import Nodes, node_means
 from ..links import LinkSet, Sampling, centroid_ff, leaf_point, sample_leaf
 from ..problem import Surfels
 from ..rays import lift, visible
-from .base import Solution
+from .base import Solution, iterate
 from .reference import fan_sample, point_ff
 
 
@@ -236,28 +236,12 @@ def leaf_gather(problem, links, exitance: np.ndarray) -> np.ndarray:
 def solve(problem) -> Solution:
     """Indirect lighting per element (float32[n,3], irradiance/π): iterations over the links until
     the largest change is below ``tolerance`` × the largest lighting value, or ``bounces``."""
-    settings, stages = problem.settings, problem.stages
-    direct = problem.direct
     links = links_of(problem)
-    d = problem.device.name
-    n = problem.elements.count
     step = Iteration(problem, links)
-    dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
-    current = wp.zeros(n, dtype=wp.vec3, device=d)
-    nxt = wp.zeros(n, dtype=wp.vec3, device=d)
-    before = np.zeros((n, 3), np.float32)
-    scale_direct = float(np.abs(direct).max(initial=0.0))
-    iterations = 0
-    for iterations in range(1, settings.bounces):
-        step(dev_direct, current, nxt)
-        current, nxt = nxt, current
-        now = current.numpy()
-        change = float(np.abs(now - before).max(initial=0.0))
-        scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
-        before = now
-        stages.report("bounces", iterations / settings.bounces)
-        if change <= settings.tolerance * scale:
-            break
+    # the last bounce is made at the elements themselves
+    _, iterations, dev_direct, current = iterate(problem, lambda d, i, o, k: step(d, i, o),
+                                               problem.settings.bounces - 1)
+    nxt = wp.empty(problem.elements.count, dtype=wp.vec3, device=problem.device.name)
     evaluations = step.at_leaves(dev_direct, current, nxt)
     return Solution(nxt.numpy(), {"iterations": iterations + 1, "links": links.count,
                                   "link_threshold": links.threshold, "leaf_evaluations": evaluations})

@@ -23,7 +23,7 @@ from ..errors import BakeError
 from ..formfactor import disk_ff, fan_ff
 from ..problem import Surfels
 from ..rays import lift
-from .base import Solution, reconstruct_with_detail
+from .base import Solution, iterate, reconstruct_with_detail
 
 # Below this many disk areas of squared distance the disk approximation is replaced by the
 # exact form factor of the sender's triangles. ALGORITHMS.md §1 suggests 4–8 for a fast method;
@@ -260,29 +260,16 @@ def solve(problem) -> Solution:
     lighting: Jacobi sweeps until the largest change is below ``tolerance`` × the largest
     lighting value, or after ``bounces`` sweeps."""
     settings, stages = problem.settings, problem.stages
-    direct = problem.direct
-    d = problem.device.name
+    problem.direct  # noqa: B018  (traced before the transport, as the stages report it)
     transport = Transport(problem)
     stages.run("form factors", transport.build, stages.reporter("form factors"))
     n = problem.elements.count
-    dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
-    current = wp.zeros(n, dtype=wp.vec3, device=d)
-    nxt = wp.zeros(n, dtype=wp.vec3, device=d)
-    before = np.zeros((n, 3), np.float32)
-    scale_direct = float(np.abs(direct).max(initial=0.0))
-    sweeps = 0
-    for sweeps in range(1, settings.bounces + 1):
-        transport.sweep(dev_direct, current, nxt,
-                        lambda f, k=sweeps: stages.report("bounces", (k - 1 + f) / settings.bounces))
-        current, nxt = nxt, current
-        now = current.numpy()
-        change = float(np.abs(now - before).max(initial=0.0))
-        scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
-        before = now
-        stages.report("bounces", sweeps / settings.bounces)
-        if change <= settings.tolerance * scale:
-            break
-    return Solution(before, {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps,
+
+    def sweep(direct, current, out, k):
+        transport.sweep(direct, current, out, lambda f: stages.report("bounces", (k - 1 + f) / settings.bounces))
+
+    values, sweeps, _, _ = iterate(problem, sweep, settings.bounces)
+    return Solution(values, {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps,
                              "transport": MODES[transport.mode]})
 
 
