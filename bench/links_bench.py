@@ -45,7 +45,6 @@ from rooms import room, sun  # noqa: E402
 from radiosity_baker.core import Settings, bake, links, metrics  # noqa: E402
 from radiosity_baker.core.problem import Problem  # noqa: E402
 from radiosity_baker.core.solvers import hierarchical  # noqa: E402
-from radiosity_baker.core.stages import Stages  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ANCHOR = {"links_per_second": 50e6, "what": "Meyer et al. 2009, GTX 260: link creation for antiradiance "

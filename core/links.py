@@ -8,9 +8,9 @@ round, one kernel evaluates the *oracle* of every candidate and decides:
   the nodes' normal cones and bounding spheres), or a leaf paired with itself;
 - link: the pair's transfer estimate (``pair_need``: each side's size as the other sees it, a
   form factor, and its normal spread as a receiver), times the pair's brightness weight when a
-  radiance estimate is given, is below the threshold; two leaves always link (their near field
-  is exact) — unless the link's rays find it partly visible while its estimate exceeds
-  PARTIAL × the threshold: it is split instead, so shadow boundaries are resolved by finer links;
+  radiance estimate is given, is below the threshold — unless the link's rays find it partly
+  visible while its estimate exceeds PARTIAL × the threshold: it is split instead, so shadow
+  boundaries get finer links; two leaves always link (their near field is exact);
 - split: the side with the larger estimate (a leaf never): its children are paired with the
   other side; a node paired with itself becomes all pairs of its children (each unordered pair
   once). Pairs hold leaves or nodes with several children (``canonical``).
@@ -23,8 +23,8 @@ link carries both directions.
 A link's transfer both ways is estimated where it is made (``sampled_transfer``): ``rays`` sample
 pairs, one leaf of each node (a leaf node is its own), stratified; per sample the element form
 factor from the receiving leaf's point to the sending leaf (``reference.point_ff``: disk far,
-exact triangles near) per unit area, times whether the segment between the two points is free
-(with visibility). Given a radiance estimate, leaves are drawn in proportion to area × (radiance
+exact triangles near) per unit area, times one of the reference's visibility rays between the two
+leaves (``element_ray``; with visibility). Given a radiance estimate, leaves are drawn in proportion to area × (radiance
 + a floor), and each direction's mean is weighted by the radiance at its sending end over the
 sampling density (self-normalised), so what a link carries is Σ A·B·F·V over the sender — a hot
 spot hidden in a cluster (the ceiling 1 mm above the Cornell light) does not leak through the
