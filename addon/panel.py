@@ -37,7 +37,7 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col.prop(s, "attribute")
         col.prop(s, "device")
         col = layout.column(align=True)
-        for name in ("light_samples", "visibility_rays", "bounces", "ao_distance"):
+        for name in ("light_samples", "visibility_rays", "link_threshold", "bounces", "ao_distance"):
             _prop(col, s, name)
         layout.prop(s, "bake_copy")
         col = layout.column(heading="Lightmap")
@@ -98,7 +98,7 @@ class RENDER_PT_radiosity_bake_advanced(_SubPanel, bpy.types.Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         s = context.scene.radiosity_baker
-        for name in ("tolerance", "max_pairs", "seed"):
+        for name in ("tolerance", "max_pairs", "link_memory", "seed"):
             _prop(layout, s, name)
 
 

@@ -20,7 +20,8 @@ from .errors import SettingsError
 _initialised = False
 _load_lock = threading.RLock()
 # The package's modules that hold kernels (relative to this package), loaded by load_kernels.
-KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "lightmap.raster")
+KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "links", "solvers.hierarchical",
+                  "lightmap.raster")
 
 
 def init_warp() -> None:

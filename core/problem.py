@@ -4,7 +4,8 @@ It holds the scene (recentred: see ``SceneData.recentred``), the settings, the d
 (progress, cancellation, timings, warnings), the shading vertices and elements, and everything the
 kernels read, uploaded to the device once: the BVH of all triangles, the lights, and the elements
 as one ``Surfels`` struct. Direct light per element, the cluster tree and (for link-based
-solvers) links are computed the first time they are asked for and kept.
+solvers) links are computed the first time they are asked for and kept (links per oracle, until
+the scene moves).
 """
 from __future__ import annotations
 
@@ -98,6 +99,7 @@ class Problem:
         # The solution of the previous frame of an animation (``pipeline.Sequence``), which
         # iterating solvers start from; None for a first or single frame.
         self.previous = None
+        self._links = {}
         self.counts = {"objects": len(scene.object_names), "triangles": scene.num_triangles,
                        "vertices": scene.num_vertices, "shading_vertices": self.shading.count,
                        "elements": els.count, "lamps": len(scene.lamps),
@@ -144,6 +146,7 @@ class Problem:
         s.area.assign(els.area)
         self.__dict__.pop("direct", None)
         self.counts["rays"] = 0
+        self._links.clear()  # links are made again from scratch over the refitted tree
         if "tree" in self.__dict__:
             from . import hierarchy
 
@@ -171,6 +174,21 @@ class Problem:
         tree = self.stages.run("hierarchy", hierarchy.build, self)
         self.counts["nodes"] = tree.count
         return tree
+
+    def links(self, oracle, radiance=None):
+        """The links over ``tree`` chosen by ``oracle`` (``links.Oracle``, the cache key), built the
+        first time each is asked for and kept until the scene moves (``links.Links``).
+        ``radiance()`` gives the first radiance estimate (float32[n,3]) an oracle with
+        ``brightness`` is built with; it is called only when the links are built."""
+        if oracle not in self._links:
+            from . import links as links_mod
+
+            estimate = radiance() if radiance is not None else None
+            made = self.stages.run("links", links_mod.build, self, oracle, estimate)
+            self.counts["links"] = made.count
+            self.counts["rays"] += made.rays_traced
+            self._links[oracle] = made
+        return self._links[oracle]
 
 
 def _mesh(scene: SceneData, device: str) -> wp.Mesh:

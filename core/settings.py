@@ -9,6 +9,7 @@ and how).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from typing import Optional
 
@@ -99,7 +100,7 @@ def _option(default, label, help, group, **kwargs):
 class Settings:
     """Bake settings; see each field's Option (``option(name)``) for its meaning and range."""
 
-    method: str = _option("reference", "Method", "how light transport is computed", "solver",
+    method: str = _option("hierarchical", "Method", "how light transport is computed", "solver",
                           choices=METHODS)
     content: str = _option("lighting", "Content", "which quantity is baked", "output",
                            choices=CONTENTS)
@@ -112,8 +113,9 @@ class Settings:
     light_samples: int = _option(16, "Light Samples", "shadow samples per lamp / emissive triangle "
                                  "and receiver (softer, less noisy shadows)", "solver", low=1,
                                  soft_high=256, flag="--samples")
-    visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair for the "
-                                   "visibility of indirect light", "solver", low=1, high=255,
+    visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair (reference) or "
+                                   "link (hierarchical) for the visibility of indirect light",
+                                   "solver", low=1, high=255,
                                    soft_high=64, flag="--rays")
     bounces: int = _option(64, "Bounces", "at most this many indirect bounces (sweeps)", "solver",
                            low=1, soft_high=128)
@@ -123,6 +125,13 @@ class Settings:
     max_pairs: int = _option(16_000_000, "Max Pairs", "memory budget of the all-pairs transport, "
                              "in element pairs at 4 bytes each (the visibility alone takes 1 "
                              "byte a pair)", "solver", low=1)
+    link_threshold: float = _option(0.1, "Link Threshold", "largest unoccluded transfer (form "
+                                    "factor bound) a link between two element clusters may carry; "
+                                    "smaller makes more, finer links (slower, more accurate)",
+                                    "solver", low=1e-5, high=1.0, digits=4)
+    link_memory: int = _option(4096, "Link Memory", "memory budget of the links (MB); a scene that "
+                               "would need more gets coarser links, with a warning", "solver",
+                               low=1, soft_high=65536)
     seed: int = _option(1, "Seed", "random seed of the sample jitter (results are deterministic "
                         "for a seed)", "solver", low=0)
     frames: str = _option("", "Frames", "frame range A:B[:STEP] to bake as an animation, each "
@@ -209,7 +218,7 @@ class Settings:
         """Settings changed from their defaults that the chosen solver does not read (for a
         warning: a bunnell bake ignores --bounces)."""
         return [f.name for f in fields(self)
-                if getattr(self, f.name) != f.default and not reads(self.solver, f.name)]
+                if not _same(getattr(self, f.name), f.default) and not reads(self.solver, f.name)]
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -217,6 +226,13 @@ class Settings:
     def group(self, name: str) -> dict:
         """{field: value} of the settings read by ``name`` (one of GROUPS)."""
         return {f.name: getattr(self, f.name) for f in fields(self) if option(f.name).group == name}
+
+
+def _same(value, default) -> bool:
+    """A setting left at its default; floats to single precision (Blender's float properties)."""
+    if isinstance(default, float) and isinstance(value, float):
+        return math.isclose(value, default, rel_tol=1e-6, abs_tol=1e-12)
+    return value == default
 
 
 def option(name: str) -> Option:

@@ -23,7 +23,7 @@ from ..errors import BakeError
 from ..formfactor import disk_ff, fan_ff
 from ..problem import Surfels
 from ..rays import lift
-from .base import Solution, reconstruct_with_detail
+from .base import Solution, iterate, reconstruct_with_detail
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -76,11 +76,17 @@ def _triangle_area2(points: wp.array(dtype=wp.vec3), tris: wp.array(dtype=wp.int
 @wp.func
 def element_ff(s: Surfels, i: int, j: int) -> float:
     """Form factor from element i's point to the front of element j."""
-    p = s.pos[i]
+    return point_ff(s, s.pos[i], s.nrm[i], j)
+
+
+@wp.func
+def point_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int) -> float:
+    """Form factor from point p (unit normal n) to the front of element j: its disk far away, its
+    exact triangles when d² < NEAR·A_j."""
     d = s.pos[j] - p
     if wp.dot(d, d) < NEAR * s.area[j]:
-        return fan_ff(p, s.nrm[i], j, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-    return disk_ff(p, s.nrm[i], s.pos[j], s.nrm[j], s.area[j])
+        return fan_ff(p, n, j, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+    return disk_ff(p, n, s.pos[j], s.nrm[j], s.area[j])
 
 
 @wp.func
@@ -276,31 +282,16 @@ def solve(problem) -> Solution:
     largest change is below ``tolerance`` × the largest lighting value, or after ``bounces``
     sweeps."""
     settings, stages = problem.settings, problem.stages
-    direct = problem.direct
-    d = problem.device.name
+    problem.direct  # noqa: B018  (traced before the transport, as the stages report it)
     transport = Transport(problem)
     stages.run("form factors", transport.build, stages.reporter("form factors"))
     n = problem.elements.count
-    dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
-    # An animation's previous frame is the starting point: its light has mostly converged already.
-    start = problem.previous.values if problem.previous is not None else np.zeros((n, 3), np.float32)
-    current = wp.array(start, dtype=wp.vec3, device=d)
-    nxt = wp.zeros(n, dtype=wp.vec3, device=d)
-    before = start
-    scale_direct = float(np.abs(direct).max(initial=0.0))
-    sweeps = 0
-    for sweeps in range(1, settings.bounces + 1):
-        transport.sweep(dev_direct, current, nxt,
-                        lambda f, k=sweeps: stages.report("bounces", (k - 1 + f) / settings.bounces))
-        current, nxt = nxt, current
-        now = current.numpy()
-        change = float(np.abs(now - before).max(initial=0.0))
-        scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
-        before = now
-        stages.report("bounces", sweeps / settings.bounces)
-        if change <= settings.tolerance * scale:
-            break
-    return Solution(before, {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps,
+
+    def sweep(direct, current, out, k):
+        transport.sweep(direct, current, out, lambda f: stages.report("bounces", (k - 1 + f) / settings.bounces))
+
+    values, sweeps, _, _ = iterate(problem, sweep, settings.bounces)
+    return Solution(values, {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps,
                              "transport": MODES[transport.mode]})
 
 
