@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import os
+import threading
 
 import bpy
 
-from . import cli, lightmap, operator, panel, props
+from . import cli, lightmap, live, operator, panel, props
 
 _cli_handle = None
 
@@ -20,10 +21,27 @@ def _use_extension_warp_cache() -> None:
     os.environ.setdefault("WARP_CACHE_PATH", path)
 
 
+def _compile_kernels_ahead() -> None:
+    """Compile the Warp kernels in a background thread when the extension is enabled, so the first
+    Bake press does not wait for it (~20 s on a 2-core CPU; later loads come from the cache). A
+    bake meanwhile waits for the modules being compiled; a failure here only means the first bake
+    compiles them."""
+    def work():
+        from ..core import device
+        try:
+            device.load_kernels(device.select("auto"))
+        except Exception:  # noqa: BLE001 - the bake compiles (and reports) what is missing
+            pass
+
+    threading.Thread(target=work, name="radiosity_baker kernels", daemon=True).start()
+
+
 def register() -> None:
     global _cli_handle
     _use_extension_warp_cache()
+    _compile_kernels_ahead()
     props.register()
+    live.register()
     for cls in operator.classes + lightmap.classes + panel.classes:
         bpy.utils.register_class(cls)
     try:
@@ -39,4 +57,5 @@ def unregister() -> None:
         _cli_handle = None
     for cls in reversed(operator.classes + lightmap.classes + panel.classes):
         bpy.utils.unregister_class(cls)
+    live.unregister()
     props.unregister()

@@ -94,6 +94,9 @@ def _parser() -> argparse.ArgumentParser:
                       help="write timings, counts, device, settings and versions as JSON")
     bake.add_argument("--preview", metavar="OUT.png", type=Path,
                       help="render the camera view of the baked attribute to a PNG (Cycles)")
+    warm = commands.add_parser("compile-kernels", help="compile the Warp kernels now (kept in "
+                                                       "Warp's cache), so the first bake is not slow")
+    warm.add_argument("--device", choices=core_settings.DEVICES, default="auto")
     return parser
 
 
@@ -115,7 +118,7 @@ def main(argv: list[str]) -> int:
     except SystemExit as exc:  # --help
         return exc.code or 0
     try:
-        return _bake(args)
+        return _compile_kernels(args) if args.command == "compile-kernels" else _bake(args)
     except (UsageError, SettingsError, OutputError) as exc:
         return _error(str(exc), 2)
     except (BakeCancelled, KeyboardInterrupt):
@@ -126,6 +129,17 @@ def main(argv: list[str]) -> int:
     except Exception as exc:  # noqa: BLE001 - a bug: its traceback, then one line; Blender stays open
         traceback.print_exc()
         return _error(f"internal error: {type(exc).__name__}: {exc}", 1)
+
+
+def _compile_kernels(args) -> int:
+    from ..core import device
+
+    dev = device.select(args.device)
+    t0 = time.perf_counter()
+    compiled = device.load_kernels(dev)
+    print(f"{PROG}: {compiled} of {len(device.KERNEL_MODULES)} kernel modules compiled for "
+          f"{dev.name} in {time.perf_counter() - t0:.1f} s (the others were cached)")
+    return 0
 
 
 def _bake(args) -> int:
@@ -267,6 +281,7 @@ def _report(job: BakeJob, settings: Settings, blend: str, outputs: dict) -> dict
         "counts": result.counts,
         "peak_memory_bytes": result.peak_memory_bytes,
         "warnings": job.warnings,
+        "frames": job.frames,
         "input": blend,
         "outputs": outputs,
         "lightmaps": {page: str(path) for page, path in job.lightmap_files.items()},

@@ -77,6 +77,15 @@ class Extraction:
     targets: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
 
+    def adopt(self, shading) -> None:
+        """Map the targets' face corners to ``shading`` (``core.elements.ShadingVertices`` of these
+        triangles: where a bake's per-vertex results are)."""
+        self.shading = shading
+        for t in self.targets:
+            t.corner_shading = np.empty(t.corner_vert.shape[0], np.int32)
+            span = slice(t.triangle_offset, t.triangle_offset + t.corner_triangles.shape[0])
+            t.corner_shading[t.corner_triangles] = shading.corner[span]
+
 
 # ----------------------------------------------------------------------------------------------
 # materials
@@ -561,12 +570,9 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
                       emission=cat(4), lamps=lamps, object_names=names,
                       ao_distance=_ao_distance(depsgraph.scene), origin=centre)
     # Results come per shading vertex (split by core where a vertex's normals differ).
-    shading = shading_vertices(scene)
-    for t in targets:
-        t.corner_shading = np.empty(t.corner_vert.shape[0], np.int32)
-        span = slice(t.triangle_offset, t.triangle_offset + t.corner_triangles.shape[0])
-        t.corner_shading[t.corner_triangles] = shading.corner[span]
-    return Extraction(scene=scene, shading=shading, targets=targets, warnings=warnings)
+    extraction = Extraction(scene=scene, targets=targets, warnings=warnings)
+    extraction.adopt(shading_vertices(scene))
+    return extraction
 
 
 def _ao_distance(scene) -> float:

@@ -1,11 +1,14 @@
-"""BakeJob: one bake, shared by the operator (modal or not) and the command line.
+"""BakeJob: one bake — of the current frame or of a frame range — shared by the operator (modal or
+not) and the command line.
 
-Blender data is only touched on the main thread: extraction in ``start()``, writing in ``finish()``
-in one final step, so a failed or cancelled bake leaves the file as it was. ``core.bake`` runs in
-between, in a worker thread when started with ``start()`` (Warp releases the GIL, Blender stays
-responsive) or in the caller's thread with ``run_sync()``. What can stop the writing (names taken
-by other data, unwritable folders) is checked before baking, and again in ``finish()`` before the
-first file or Blender datum is written, since the file may have changed during a modal bake.
+Blender data is only touched on the main thread: extraction in ``start()`` (and, for each further
+frame of an animation, in ``advance()``), writing in ``finish()`` in one final step, so a failed
+or cancelled bake leaves the file as it was. The bake of each frame (``core.pipeline.Sequence``:
+the problem carries over from frame to frame) runs in between, in a worker thread when started
+with ``start()`` (Warp releases the GIL, Blender stays responsive) or in the caller's thread with
+``run_sync()``. What can stop the writing (names taken by other data, unwritable folders) is
+checked before baking, and again in ``finish()`` before the first file or Blender datum is
+written, since the file may have changed during a modal bake.
 """
 from __future__ import annotations
 
@@ -13,9 +16,10 @@ import threading
 import time
 from typing import Callable, Iterable, Optional
 
-from .. import core
 from ..core import BakeCancelled, BakeError, Settings
-from . import extract, lightmap, props, write
+from ..core.pipeline import Sequence
+from . import animation, extract, lightmap, props, write
+from .outputs import Staging
 
 # Errors caused by the scene, the settings (core.errors.SettingsError is a BakeError) or where the
 # results go (outputs.OutputError): shown to the user as their message alone. Anything else is a
@@ -26,19 +30,33 @@ USER_ERRORS = (extract.ExtractionError, BakeError)
 class BakeJob:
     """Bake ``settings`` into the objects named ``receivers`` (None: every mesh of the scene).
 
-    progress(stage, fraction) and notify(warning) are optional and called from the thread that
-    bakes (notify as each warning of the bake arises, e.g. a long bake announced before it runs). After
-    ``finish()``: ``result`` (core BakeResult), ``timings`` (seconds per stage, extraction and
-    writing included), ``warnings`` (extraction, bake and writing) and ``seconds`` (wall time).
+    frames: the frames of an animation to bake (default ``settings.frames``; None: the current
+    frame). progress(stage, fraction) and notify(warning) are optional and called from the thread
+    that bakes (notify as each warning of the bake arises, e.g. a long bake announced before it
+    runs). After ``finish()``: ``result`` (core BakeResult, of the last frame), ``frames`` (per
+    baked frame: frame, seconds, stages, counts), ``timings`` (seconds per stage over all frames,
+    extraction and writing included), ``warnings`` (extraction, bake and writing) and ``seconds``
+    (wall time).
     """
 
     def __init__(self, settings: Settings, receivers: Optional[Iterable[str]] = None,
                  progress: Optional[Callable[[str, float], None]] = None,
-                 notify: Optional[Callable[[str], None]] = None):
+                 notify: Optional[Callable[[str], None]] = None,
+                 frames: Optional[list[int]] = None):
         self.settings = settings
         self.receivers = None if receivers is None else list(receivers)
         self._user_progress = progress
         self._notify = notify
+        self._todo = list(frames) if frames is not None else settings.frame_list()
+        self.animation = self._todo is not None
+        self._sequence = None
+        self._frame = None          # the frame being baked (None: the current one, no animation)
+        self._frame_now = None      # the scene's frame when the bake started
+        self._baked: list = []      # (frame, extraction, result) per baked frame
+        self._first_lightmap = None  # an animation's first frame: (request, LightmapResult, paths)
+        self._staging = None        # an animation's lightmap files, staged frame by frame
+        self._folder = None
+        self.frames: list = []
         self._cancel = threading.Event()
         self._lock = threading.Lock()
         self._stage, self._fraction = "extract", 0.0
@@ -56,30 +74,48 @@ class BakeJob:
     # -- main thread -----------------------------------------------------------------------------
 
     def start(self, context) -> None:
-        """Extract the scene (main thread), then bake in a worker thread.
+        """Extract the scene (main thread), then bake in a worker thread; an animation's further
+        frames follow through ``advance``.
 
         Raises USER_ERRORS for settings or scenes that cannot be baked; nothing was changed then.
         """
+        self._begin(context)
         self._extract(context)
-        self._thread = threading.Thread(target=self._bake, name="radiosity_baker", daemon=True)
-        self._thread.start()
+        self._launch()
+
+    def advance(self, context) -> None:
+        """Main thread, from a UI timer: once a frame is baked, extract the next one (if any) and
+        bake it in a worker thread. Does nothing while a frame bakes, after an error or a cancel."""
+        if self._thread is not None and self._thread.is_alive():
+            return
+        if self.error is None and not self._cancel.is_set() and self._todo:
+            self._extract(context)
+            self._launch()
 
     def run_sync(self, context) -> list[str]:
         """The whole bake in the calling (main) thread; returns the warnings (see ``finish``)."""
-        self._extract(context)
-        self._bake()
+        self._begin(context)
+        while True:
+            self._extract(context)
+            self._bake()
+            if self.error is not None or not self._todo:
+                break
         return self.finish(context)
 
     def poll(self) -> tuple[str, float, bool]:
         """(stage, fraction of that stage in [0,1], done); cheap, for a UI timer."""
         with self._lock:
             stage, fraction = self._stage, self._fraction
-        done = self._thread is None or not self._thread.is_alive()
+        idle = self._thread is None or not self._thread.is_alive()
+        done = idle and (self.error is not None or self._cancel.is_set() or not self._todo)
         return stage, fraction, done
 
     def cancel(self) -> None:
-        """Ask the bake to stop at its next check; ``finish()`` then raises BakeCancelled."""
+        """Ask the bake to stop at its next check; ``finish()`` then raises BakeCancelled (and
+        removes what was staged; so does this call when no frame is baking)."""
         self._cancel.set()
+        if self._thread is None or not self._thread.is_alive():
+            self._discard_staging()
 
     def finish(self, context) -> list[str]:
         """Wait for the bake, then write the results in one step; returns all warnings.
@@ -91,30 +127,76 @@ class BakeJob:
         if self.error is None and self._cancel.is_set():
             self.error = BakeCancelled("bake cancelled")
         if self.error is not None:
+            self._discard_staging()
             raise self.error
+        try:
+            return self._write(context)
+        finally:
+            self._discard_staging()
+
+    def _write(self, context) -> list[str]:
         t0 = time.perf_counter()
         # Every check first (objects resolved by name, names free): a failure writes nothing.
         colors = maps = None
         if self.settings.target in ("vertex_colors", "both"):
-            colors = write.prepare_color_attributes(self.extraction, self.result.output,
-                                                    self.settings.attribute, self.settings, context)
-        if self.lightmap_request is not None:
-            maps = lightmap.prepare(self.result.lightmap, self.lightmap_request, self.settings)
+            if self.animation:
+                colors = animation.prepare([(f, ex, r.output) for f, ex, r in self._baked],
+                                           self.settings.attribute, self.settings, self._frame_now,
+                                           context)
+            else:
+                colors = write.prepare_color_attributes(self.extraction, self.result.output,
+                                                        self.settings.attribute, self.settings, context)
+        sequence = None
+        if self._staging is not None:  # an animation: the first frame's layout, staged files
+            request, result, self.lightmap_files = self._first_lightmap
+            maps = lightmap.prepare(result, request, self.settings)
+            self._staging.commit()
+            frames = [f for f, _, _ in self._baked]
+            sequence = (frames[0], frames[-1] - frames[0] + 1)
+        elif self.lightmap_request is not None:
+            result = self.result.lightmap
+            maps = lightmap.prepare(result, self.lightmap_request, self.settings)
             # files next, all or none: a disk error leaves Blender untouched
-            self.lightmap_files = lightmap.write_files(self.result.lightmap, self.settings)
+            self.lightmap_files = lightmap.write_files(result, self.settings)
         if colors is not None:
             self.warnings += colors.apply(context)
         if maps is not None:
-            self.warnings += maps.apply(self.result.lightmap, self.lightmap_files, self.settings)
+            self.warnings += maps.apply(result, self.lightmap_files, self.settings, sequence)
         self.timings["write"] = time.perf_counter() - t0
         self.seconds = time.perf_counter() - self._t0
         if hasattr(context.scene, "radiosity_baker"):  # the CLI may run without the add-on registered
             props.store_stats(context.scene, self.result, self.seconds)
         return self.warnings
 
-    def _extract(self, context) -> None:
+    def _begin(self, context) -> None:
         self._t0 = time.perf_counter()
         self.settings.validate()
+        self._frame_now = context.scene.frame_current
+        self._sequence = Sequence(self.settings, self._on_progress, self._cancel, self._notify)
+        if self.animation and self.settings.bake_copy:
+            raise BakeError("--bake-copy bakes one frame's evaluated mesh: it does not go with a "
+                            "frame range")
+        if self.animation and self.settings.target != "vertex_colors":
+            # every frame's pages are staged as they are baked and go into place together
+            self._folder = lightmap.output_folder(self.settings)
+            self._staging = Staging()
+
+    def _extract(self, context) -> None:
+        """Extract the next frame (the current one for a still bake), the scene's frame restored."""
+        t0 = time.perf_counter()
+        self._frame = self._todo.pop(0) if self.animation else None
+        scene = context.scene
+        if self._frame is not None and self._frame != scene.frame_current:
+            scene.frame_set(self._frame)
+            try:
+                self._extract_current(context)
+            finally:
+                scene.frame_set(self._frame_now)
+        else:
+            self._extract_current(context)
+        self.timings["extract"] = self.timings.get("extract", 0.0) + time.perf_counter() - t0
+
+    def _extract_current(self, context) -> None:
         receivers = None
         if self.receivers is not None:
             missing = [n for n in self.receivers if n not in context.scene.objects]
@@ -130,27 +212,73 @@ class BakeJob:
             else:
                 where = f"among {', '.join(self.receivers)}" if self.receivers else "named"
             raise extract.ExtractionError(f"nothing to write: no visible mesh with faces {where}")
-        if self.settings.target in ("vertex_colors", "both"):
-            write.check_color_attributes(self.extraction, self.settings.attribute, self.settings,
-                                         context)
+        if self.settings.target in ("vertex_colors", "both") and not self._baked:
+            names = [self.settings.attribute]
+            if self.animation:
+                names += [animation.frame_attribute(self.settings.attribute, f)
+                          for f in [self._frame, *self._todo]]
+            for name in names:
+                write.check_color_attributes(self.extraction, name, self.settings, context)
         if self.settings.target in ("lightmap", "both"):
             lightmap.output_folder(self.settings)  # an unwritable folder fails before baking
-            self.lightmap_request, warnings = lightmap.request(self.extraction, self.settings)
-            self.warnings += warnings
-        self.timings["extract"] = time.perf_counter() - self._t0
+            request, warnings = lightmap.request(self.extraction, self.settings)
+            first = self._first_lightmap
+            if first is not None:  # an animation's later frames: the first frame's layout
+                for t in request.targets:
+                    t.corner_uv = first[1].uv.get(t.mesh_name, t.corner_uv)
+                request.sizes = first[1].sizes
+            else:
+                self.warnings += warnings
+            self.lightmap_request = request
 
     # -- any thread ------------------------------------------------------------------------------
 
+    def _launch(self) -> None:
+        self._thread = threading.Thread(target=self._bake, name="radiosity_baker", daemon=True)
+        self._thread.start()
+
     def _bake(self) -> None:
-        """core.bake; any exception is kept for ``finish()`` to raise on the main thread."""
+        """Bake the extracted frame; any exception is kept for ``finish()`` to raise on the main
+        thread."""
+        label = f"frame {self._frame}" if self._frame is not None else ""
+        t0 = time.perf_counter()
         try:
-            self.result = core.bake(self.extraction.scene, self.settings, self._on_progress,
-                                    self._cancel, lightmap=self.lightmap_request, notify=self._notify)
+            self.result = self._sequence.bake(self.extraction.scene, self.lightmap_request, label)
         except BaseException as exc:  # noqa: BLE001 - re-raised by finish()
             self.error = exc
             return
-        self.timings.update(self.result.timings)
-        self.warnings += self.result.warnings
+        for stage, seconds in self.result.timings.items():
+            self.timings[stage] = self.timings.get(stage, 0.0) + seconds
+        self.warnings += [w for w in self.result.warnings if w not in self.warnings]
+        if self._staging is not None:
+            try:
+                self._stage_lightmaps()
+            except BaseException as exc:  # noqa: BLE001 - re-raised by finish()
+                self.error = exc
+                return
+        if self.animation:
+            self._baked.append((self._frame, self.extraction, self.result))
+            self.frames.append({"frame": self._frame, "seconds": round(time.perf_counter() - t0, 4),
+                                "stages": {k: round(v, 4) for k, v in self.result.timings.items()},
+                                "counts": self.result.counts})
+
+    def _stage_lightmaps(self) -> None:
+        """Stage the pages of the frame just baked as ``<page>.<frame>.exr``, and again for each
+        frame up to the next baked one (a sequence with a step holds each frame), so the image
+        sequence has a file for every scene frame."""
+        upto = self._todo[0] if self._todo else self._frame + 1
+        paths = None
+        for frame in range(self._frame, upto):
+            written = lightmap.write_files(self.result.lightmap, self.settings, self._staging, frame,
+                                           self._folder)
+            paths = paths or written
+        if self._first_lightmap is None:
+            self._first_lightmap = (self.lightmap_request, self.result.lightmap, paths)
+
+    def _discard_staging(self) -> None:
+        if self._staging is not None:
+            self._staging.__exit__(None, None, None)  # removes what was staged
+            self._staging = None
 
     def _on_progress(self, stage: str, fraction: float) -> None:
         with self._lock:

@@ -13,6 +13,7 @@ and a warning says so.
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -139,18 +140,30 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
     return LightmapRequest(targets, python=python_executable(), cache_dir=_cache_dir()), warnings
 
 
-def write_files(result, settings) -> dict[str, Path]:
-    """Write each page as ``<folder>/<page>.exr`` (a tile of a UDIM set as ``<image>.<tile>.exr``)
+def write_files(result, settings, staging=None, frame=None, folder=None) -> dict[str, Path]:
+    """Write each page as ``<folder>/<page>.exr`` (a tile of a UDIM set as ``<image>.<tile>.exr``;
+    ``<page>.<frame>.exr`` for a frame of an animation, four digits: a Blender image sequence)
     plus a ``.png`` preview; {page stem: exr path}.
 
     All files are written under temporary names, read back, then moved into place together: on
-    any failure (OutputError) the folder is as it was.
+    any failure (OutputError) the folder is as it was. ``staging``: an ``outputs.Staging`` the
+    caller commits (an animation's frames go into place together); ``folder``: the output folder
+    when known (it is resolved through Blender, on the main thread).
     """
-    folder = output_folder(settings)
+    folder = folder if folder is not None else output_folder(settings)
+    suffix = "" if frame is None else f".{frame:04d}"
     paths = {}
-    with Staging() as staging:
+    with contextlib.ExitStack() as stack:
+        own = staging is None
+        if own:
+            staging = stack.enter_context(Staging())
         for page in result.pages:
-            stem = _file_stem(page)
+            if frame is not None and page.tile is not None:
+                # Blender plays no sequence of UDIM tile sets: stop before anything is written.
+                raise OutputError(f"the lightmap {page.name} of an animation needs several pages "
+                                  f"(a UDIM tile set), which Blender cannot play as an image "
+                                  f"sequence: bake with --atlas-pages one or --layout per_object")
+            stem = _file_stem(page) + suffix
             paths[page.stem] = folder / f"{stem}.exr"
             with staging.writing(paths[page.stem]) as temp:
                 files.write_exr(temp, page.rgb, settings.lightmap_format)
@@ -158,7 +171,8 @@ def write_files(result, settings) -> dict[str, Path]:
             with staging.writing(folder / f"{stem}.png") as temp:
                 files.write_preview(temp, page.rgb)
                 files.verify(temp, page.size)
-        staging.commit()
+        if own:
+            staging.commit()
     return paths
 
 
@@ -171,19 +185,24 @@ class LightmapWrites:
     hookups: list
     warnings: list
 
-    def apply(self, result, paths: dict, settings) -> list[str]:
-        """UV maps, images (loaded from ``paths``, {page name: exr path}) and material nodes;
-        returns all warnings."""
+    def apply(self, result, paths: dict, settings, frames=None) -> list[str]:
+        """UV maps, images (loaded from ``paths``, {page stem: exr path}) and material nodes;
+        returns all warnings. frames: (first, count) of an animation's image sequences, whose first
+        files ``paths`` names."""
         for me, uv in self.uv:
             _write_uv(me, uv)
+        warnings = list(self.warnings)
+        pack = settings.pack_images and frames is None
+        if settings.pack_images and frames is not None:
+            warnings.append("lightmap image sequences are not packed (Blender packs single images): "
+                            "keep the output folder with the .blend")
         images = {}
         for page in result.pages:  # the tiles of a UDIM set make one image, loaded through any
             if page.name not in images:
-                images[page.name] = _load_image(page.name, paths[page.stem], page.tile is not None,
-                                                settings.pack_images)
-        warnings = list(self.warnings)
+                images[page.name] = _load_image(page.name, paths[page.stem], pack, page.tile is not None,
+                                                frames is not None)
         for mat, page in self.hookups:
-            warnings += _hook_up(mat, images[page], settings.hookup == "multiply")
+            warnings += _hook_up(mat, images[page], settings.hookup == "multiply", frames)
         return warnings
 
 
@@ -257,10 +276,11 @@ def _file_stem(page) -> str:
     return bpy.path.clean_name(page.name) + ("" if page.tile is None else f".{page.tile}")
 
 
-def _load_image(name: str, path: Path, tiled: bool, pack: bool):
+def _load_image(name: str, path: Path, pack: bool, tiled: bool = False, sequence: bool = False):
     """Our image ``name`` reloaded from ``path`` (with ``tiled``, one tile file of its UDIM set:
-    Blender finds the others), or a new one loaded from it (a user's image of that name is left
-    alone: Blender gives ours a numbered name)."""
+    Blender finds the others; with ``sequence``, the first file of an image sequence), or a new
+    one loaded from it (a user's image of that name is left alone: Blender gives ours a numbered
+    name)."""
     image = next((im for im in bpy.data.images if im.get(IMAGE_TAG) == name), None)
     if image is None:
         image = bpy.data.images.load(str(path), check_existing=False)
@@ -272,8 +292,8 @@ def _load_image(name: str, path: Path, tiled: bool, pack: bool):
             image.unpack(method="REMOVE")
         image.source = "FILE"
         image.filepath = str(path)
-    if tiled:
-        image.source = "TILED"  # from the file name's tile number Blender finds the whole set
+    # from the file name's tile number Blender finds the whole set, from its frame number the rest
+    image.source = "TILED" if tiled else "SEQUENCE" if sequence else "FILE"
     image.reload()
     image.colorspace_settings.name = COLORSPACE
     if pack:
@@ -281,9 +301,10 @@ def _load_image(name: str, path: Path, tiled: bool, pack: bool):
     return image
 
 
-def _hook_up(mat, image, multiply: bool) -> list[str]:
+def _hook_up(mat, image, multiply: bool, frames=None) -> list[str]:
     """Add (or update) the UV Map + Image Texture pair showing ``image``; with ``multiply`` also a
-    Mix (Multiply) node between the Principled BSDF's Base Color and what fed it."""
+    Mix (Multiply) node between the Principled BSDF's Base Color and what fed it. frames: (first,
+    count) of an image sequence, played with the scene's frames."""
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     uv_node = nodes.get(NODE_UV) or nodes.new("ShaderNodeUVMap")
     uv_node.name, uv_node.label, uv_node.uv_map = NODE_UV, "Lightmap UV", UV_NAME
@@ -291,6 +312,11 @@ def _hook_up(mat, image, multiply: bool) -> list[str]:
     tex.name, tex.label, tex.image, tex.interpolation = NODE_IMAGE, "Lightmap", image, "Linear"
     if not tex.inputs["Vector"].is_linked:
         links.new(uv_node.outputs["UV"], tex.inputs["Vector"])
+    if frames is not None:  # file number = scene frame (frame_start − 1 + offset + 1)
+        first, count = frames
+        user = tex.image_user
+        user.frame_start, user.frame_duration, user.frame_offset = first, count, first - 1
+        user.use_auto_refresh = True
     left = min((n.location.x for n in nodes if not n.name.startswith(NODE_PREFIX)), default=0.0)
     tex.location = (left - 320.0, -400.0)
     uv_node.location = (left - 520.0, -400.0)
@@ -365,8 +391,10 @@ class OBJECT_OT_radiosity_bake_clear(bpy.types.Operator):
     def execute(self, context):
         objects = [ob for ob in context.selected_objects] if self.use_selected else []
         objects = objects or list(context.scene.objects)
-        removed = clear(objects)
-        self.report({'INFO'}, f"Radiosity lightmaps: {removed} items removed")
+        from . import animation
+
+        removed = clear(objects) + animation.clear(objects)
+        self.report({'INFO'}, f"Radiosity bake: {removed} items removed")
         return {'FINISHED'}
 
 

@@ -38,6 +38,10 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         name="Selected Only", default=True,
         description="Write only the selected meshes (all meshes when none is selected); the whole "
                     "scene still casts and reflects light")
+    animation: BoolProperty(
+        name="Animation", default=False,
+        description="Bake every frame of the Frames setting (empty: the scene's frame range) into "
+                    "a per-frame cache that plays back")
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -82,6 +86,11 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
             return {'RUNNING_MODAL'}
         if event.type != 'TIMER':
             return {'PASS_THROUGH'}
+        try:
+            self._job.advance(context)  # an animation's next frame, extracted here (main thread)
+        except BaseException as exc:  # noqa: BLE001
+            self._end_modal(context)
+            return self._fail(exc)
         stage, fraction, done = self._job.poll()
         if not done:
             _status.update(stage=stage, fraction=fraction)
@@ -104,8 +113,13 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         self._end_modal(context)
 
     def _new_job(self, context) -> BakeJob:
-        return BakeJob(context.scene.radiosity_baker.to_settings(),
-                       _receivers(context, self.use_selected))
+        settings = context.scene.radiosity_baker.to_settings()
+        frames = None
+        if self.animation:
+            scene = context.scene
+            frames = settings.frame_list() or list(range(scene.frame_start, scene.frame_end + 1,
+                                                         max(1, scene.frame_step)))
+        return BakeJob(settings, _receivers(context, self.use_selected), frames=frames)
 
     def _end_modal(self, context) -> None:
         context.window_manager.event_timer_remove(self._timer)

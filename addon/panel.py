@@ -37,7 +37,8 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col.prop(s, "attribute")
         col.prop(s, "device")
         col = layout.column(align=True)
-        for name in ("light_samples", "light_selection", "visibility_rays", "bounces", "ao_distance"):
+        for name in ("light_samples", "light_selection", "visibility_rays", "link_threshold", "bounces",
+                     "ao_distance"):
             _prop(col, s, name)
         layout.prop(s, "bake_copy")
         col = layout.column(heading="Lightmap")
@@ -52,6 +53,10 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         row = layout.row()
         row.scale_y = 1.5
         row.operator(OBJECT_OT_radiosity_bake.bl_idname, text="Bake", icon='RENDER_STILL')
+        row = layout.row(align=True)
+        row.prop(s, "frames", text="")
+        row.operator(OBJECT_OT_radiosity_bake.bl_idname, text="Bake Animation",
+                     icon='RENDER_ANIMATION').animation = True
         layout.operator("object.radiosity_bake_clear", text="Clear Lightmaps", icon='TRASH')
         stats = s.last_bake
         if stats.device:
@@ -60,12 +65,37 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
             box.label(text=f"{stats.elements} elements, {stats.triangles} triangles")
 
 
-class RENDER_PT_radiosity_bake_advanced(bpy.types.Panel):
-    bl_label = "Advanced"
+class _SubPanel:
+    """Where the sub-panels of Radiosity Bake sit."""
+
     bl_space_type = 'PROPERTIES'
     bl_region_type = 'WINDOW'
     bl_context = "render"
     bl_parent_id = RENDER_PT_radiosity_bake.__name__
+
+
+class RENDER_PT_radiosity_bake_live(_SubPanel, bpy.types.Panel):
+    bl_label = "Live Preview"
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.radiosity_baker_live, "enabled", text="")
+
+    def draw(self, context):
+        from . import live
+
+        layout = self.layout
+        s = context.scene.radiosity_baker
+        layout.prop(context.scene.radiosity_baker_live, "keep")
+        layout.label(text=f"Shows '{live.preview_attribute(s)}' (Solid › Attribute colour)")
+        running = live.session()
+        if running is not None:
+            layout.label(text=f"{running.solves} solves ({running.settings.method})")
+            if running.error:
+                layout.label(text=running.error, icon='ERROR')
+
+
+class RENDER_PT_radiosity_bake_advanced(_SubPanel, bpy.types.Panel):
+    bl_label = "Advanced"
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw(self, context):
@@ -73,8 +103,8 @@ class RENDER_PT_radiosity_bake_advanced(bpy.types.Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         s = context.scene.radiosity_baker
-        for name in ("tolerance", "max_pairs", "seed"):
+        for name in ("tolerance", "max_pairs", "link_memory", "seed"):
             _prop(layout, s, name)
 
 
-classes = (RENDER_PT_radiosity_bake, RENDER_PT_radiosity_bake_advanced)
+classes = (RENDER_PT_radiosity_bake, RENDER_PT_radiosity_bake_live, RENDER_PT_radiosity_bake_advanced)

@@ -18,19 +18,21 @@ import warp as wp
 from .errors import SettingsError
 
 _initialised = False
+_load_lock = threading.RLock()
 # The package's modules that hold kernels (relative to this package), loaded by load_kernels.
-KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "lightmap.raster")
-_load_lock = threading.Lock()
+KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "links", "solvers.hierarchical",
+                  "lightmap.raster")
 
 
 def init_warp() -> None:
-    """Initialise Warp once, quietly."""
+    """Initialise Warp once, quietly (from any thread)."""
     global _initialised
-    if not _initialised:
-        wp.config.log_level = wp.LOG_WARNING
-        wp.config.verbose = False
-        wp.init()
-        _initialised = True
+    with _load_lock:
+        if not _initialised:
+            wp.config.log_level = wp.LOG_WARNING
+            wp.config.verbose = False
+            wp.init()
+            _initialised = True
 
 
 @dataclass(frozen=True)
@@ -68,10 +70,7 @@ def load_kernels(device: Device, on_compile: Optional[Callable[[], None]] = None
     with _load_lock:
         for name in KERNEL_MODULES:
             module = importlib.import_module(f"{package}.{name}")
-            wm = wp.get_module(module.__name__)
-            block_dim = 1 if not device.is_cuda else None
-            ident = wm.get_module_identifier(block_dim)
-            if not os.path.isdir(os.path.join(wp.config.kernel_cache_dir, ident)):
+            if not _cached(module, device):
                 if compiled == 0 and on_compile is not None:
                     on_compile()
                 compiled += 1
@@ -79,26 +78,36 @@ def load_kernels(device: Device, on_compile: Optional[Callable[[], None]] = None
     return compiled
 
 
+def _cached(module, device: Device) -> bool:
+    """Whether Warp's kernel cache holds ``module`` compiled for ``device`` (CPU launches load the
+    block_dim 1 variant)."""
+    ident = wp.get_module(module.__name__).get_module_identifier(None if device.is_cuda else 1)
+    return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, ident))
+
+
 def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
-           on_chunk: Optional[Callable[[float], None]] = None) -> None:
+           on_chunk: Optional[Callable[[float], None]] = None, serial: bool = False) -> None:
     """Launch ``kernel`` over ``n`` threads, ``kernel(offset, *inputs)``.
 
     The range is cut into ``chunks`` consecutive waves (progress and cancellation happen between
     waves through ``on_chunk(fraction_done)``, which may raise); on the CPU each wave is further
-    split over ``device.threads`` threads.
+    split over ``device.threads`` threads — unless ``serial``: Warp's atomics are plain
+    read-modify-writes on the CPU, so a kernel whose threads meet on one value through atomics
+    must run its CPU waves on one thread.
     """
     if n <= 0:
         return
     chunks = max(1, min(chunks, n))
     step = -(-n // chunks)
-    pool = ThreadPoolExecutor(device.threads) if device.threads > 1 else None
+    threads = 1 if serial and not device.is_cuda else device.threads
+    pool = ThreadPoolExecutor(threads) if threads > 1 else None
     try:
         for start in range(0, n, step):
             count = min(step, n - start)
             if pool is None:
                 wp.launch(kernel, dim=count, inputs=[start, *inputs], device=device.name)
             else:
-                sub = -(-count // device.threads)
+                sub = -(-count // threads)
                 futures = [pool.submit(wp.launch, kernel, dim=min(sub, count - s),
                                        inputs=[start + s, *inputs], device=device.name)
                            for s in range(0, count, sub)]

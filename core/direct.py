@@ -29,6 +29,8 @@ from .formfactor import outline_ff, tangent_frame, triangle_ff
 from .rays import lift, visible
 from .scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SceneData
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 PI = math.pi
 ELLIPSE_SIDES = wp.constant(32)
 # An ellipse lamp's outline is a regular polygon whose radii are scaled by this so that its area

@@ -51,10 +51,16 @@ def shading_vertices(scene: SceneData) -> ShadingVertices:
     q = np.rint(normals * NORMAL_STEPS).astype(np.int64) + NORMAL_STEPS
     if scene.num_vertices < 1 << 27:  # vertex index and three 12-bit normal components fit one int64
         key = (corner_vertex << 36) | (q[:, 0] << 24) | (q[:, 1] << 12) | q[:, 2]
-        _, first, corner = np.unique(key, return_index=True, return_inverse=True)
+        _, first, grouped = np.unique(key, return_index=True, return_inverse=True)
     else:
-        _, first, corner = np.unique(np.column_stack([corner_vertex, q]), axis=0, return_index=True,
-                                     return_inverse=True)
+        _, first, grouped = np.unique(np.column_stack([corner_vertex, q]), axis=0, return_index=True,
+                                      return_inverse=True)
+    # Numbered by vertex, then by their first corner, not by the normal's value: a deforming mesh
+    # (an animation's frames) keeps its shading vertices in the same order.
+    order = np.lexsort((first, corner_vertex[first]))
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    first, corner = first[order], rank[grouped.reshape(-1)]
     vertex = corner_vertex[first].astype(np.int32)
     n = normals[first].astype(np.float64)
     length = np.linalg.norm(n, axis=1, keepdims=True)
@@ -121,10 +127,14 @@ def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:
     border[uniq[uses == 1].ravel()] = True
     border &= area > 0
     position = p.copy()
-    # the largest triangle of each vertex: sort corners by triangle area, the last write wins
-    by_area = np.argsort(share, kind="stable")
-    largest = np.zeros(n, np.int64)
-    largest[corners[by_area]] = by_area // 3
+    # the largest triangle of each vertex; of triangles equal to 10⁻⁴ the first, so that rounding
+    # (a moved copy of the mesh) cannot pick another
+    most = np.zeros(n)
+    np.maximum.at(most, corners, share)
+    candidate = share >= most[corners] * (1.0 - 1e-4)
+    largest = np.full(n, np.iinfo(np.int64).max)
+    np.minimum.at(largest, corners[candidate], np.flatnonzero(candidate) // 3)
+    largest[largest == np.iinfo(np.int64).max] = 0
     centre = p[tris[largest]].mean(axis=1)
     position[border] += NUDGE * (centre[border] - p[border])
 

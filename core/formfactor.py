@@ -5,6 +5,8 @@ hemisphere (normal ``n`` at ``p``) covered by the sender, so ``lighting = radian
 """
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 INV_TWO_PI = 0.15915494309189535
 # A corner counts as above the receiver's horizon only if it is higher than this fraction of its
 # distance: a sender in the receiver's own plane (a neighbouring triangle of a flat wall) is seen

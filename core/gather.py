@@ -38,6 +38,8 @@ from .hierarchy import Nodes
 from .problem import Surfels
 from .traversal import cut_advance, cut_begin, cut_skip, cut_weight, opening
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 # Open a node when d² < OPEN·radius² (blended over ±10 %): the cluster disk then subtends less than
 # ~14°, where its form factor is within the 2 % the tests ask of the all-pairs sum.
 OPEN = 16.0
@@ -111,13 +113,13 @@ def leaf_blend(d2: float, area: float) -> float:
 @wp.func
 def leaf_direction(t: Nodes, centres: wp.array(dtype=wp.vec3), node: int, p: wp.vec3,
                    d2: float) -> wp.vec3:
-    """Where a leaf lies as seen from p: its disk's centre far away, the centre of its triangles
-    (``fan_centres``) near, blended as its transfer is: the direction stays defined for a
-    receiver on the element itself."""
-    blend = leaf_blend(d2, t.area[node])
+    """Where a leaf lies as seen from p: its disk's centre far away; within about the element's
+    own size, where that direction is no longer where its triangles are (and undefined for a
+    receiver on the element), towards the centre of its triangles (``fan_centres``), blended in."""
+    toward = wp.clamp((d2 / t.area[node] - 0.25) / 0.75, 0.0, 1.0)
     v = t.position[node] - p
-    if blend < 1.0:
-        v = blend * v + (1.0 - blend) * (centres[t.element[node]] - p)
+    if toward < 1.0:
+        v = toward * v + (1.0 - toward) * (centres[t.element[node]] - p)
     return wp.normalize(v)
 
 
@@ -246,7 +248,7 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     raw = float(0.0)
     dirsum = wp.vec3(0.0)
     visits = int(0)
-    cut = cut_begin(t)
+    cut = cut_begin(t.root, t.level[t.root])
     while cut.node >= 0:
         node = cut.node
         visits += 1
@@ -255,12 +257,14 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
         d2 = wp.dot(v, v)
         dist = wp.sqrt(d2)
         if dist - r >= distance or wp.dot(v, n) <= -r or t.area[node] <= 0.0:
-            cut = cut_skip(t, cut)
+            cut = cut_skip(cut, t.next[node])
             continue
-        w = cut_weight(t, cut)
+        level = t.level[node]
+        w = cut_weight(cut, level)
+        child = t.descend[node]
         part = wp.vec4(0.0)
         take = float(1.0)
-        leaf = t.descend[node] < 0
+        leaf = child < 0
         if leaf:
             if dist < distance:
                 part = w * leaf_transfer(t, s, node, p, n, d2)
@@ -276,7 +280,7 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                                            t.spread[node], t.leaves[node])
                 part[0] = sides[0]
                 part[1] = sides[1]
-        cut = cut_advance(t, cut, take)
+        cut = cut_advance(cut, level, child, t.level[wp.max(child, 0)], t.next[node], take)
         total = part[0] + part[1] + part[2] + part[3]
         if total > 0.0:
             dhat = v / dist

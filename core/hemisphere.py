@@ -3,11 +3,14 @@
 The hemisphere around a normal n is cut into BINS cells of equal cosine-weighted measure: RINGS
 rings of equal sin²θ times SECTORS sectors of equal azimuth, so each cell holds CELL = 1/BINS of a
 Lambertian receiver's view. A contribution arriving from direction d is spread bilinearly over the
-four cells around it (``splat_of`` once per direction, then ``add`` or ``raise_to`` per table).
+four cells around it (``splat_of``: four cells and their weights, which a gather applies to each
+of its tables).
 """
 import warp as wp
 
 from .formfactor import tangent_frame
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
 RINGS = 4
 SECTORS = 8
@@ -63,23 +66,3 @@ def splat_of(f: Frame, d: wp.vec3) -> Splat:
     s.cells = wp.vec4i(r0 * SECTORS + s0, r0 * SECTORS + s1, r1 * SECTORS + s0, r1 * SECTORS + s1)
     s.weights = wp.vec4((1.0 - wr) * (1.0 - ws), (1.0 - wr) * ws, wr * (1.0 - ws), wr * ws)
     return s
-
-
-@wp.func
-def add(table: bins_vec, s: Splat, value: float) -> bins_vec:
-    """``table`` with ``value`` spread over the splat's cells."""
-    out = table
-    for k in range(4):
-        c = s.cells[k]
-        out[c] = out[c] + value * s.weights[k]
-    return out
-
-
-@wp.func
-def raise_to(table: bins_vec, s: Splat, value: float) -> bins_vec:
-    """``table`` with each splat cell raised to at least its share of ``value``."""
-    out = table
-    for k in range(4):
-        c = s.cells[k]
-        out[c] = wp.max(out[c], value * s.weights[k])
-    return out

@@ -25,6 +25,8 @@ import warp as wp
 from . import device as device_mod
 from .problem import Surfels
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 MORTON_BITS = 10  # per axis: 30-bit codes
 # Levels of the tree at most: the leaves and one per Morton bit (the traversal keeps a weight per level).
 MAX_LEVELS = MORTON_BITS + 1
@@ -38,7 +40,8 @@ class Nodes:
     of the area-weighted mean of the unit normals (1 for a leaf); area: float32[m] (m²); radius:
     float32[m] (m) bounding radius of the subtree's disks around ``position`` (a leaf: √(area/π));
     leaves: float32[m] number of disks in the subtree; first_child: int32[m] (−1 for a leaf; the
-    children are first_child … up to the next node's first child, or the level's end); descend:
+    children are first_child … child_end − 1); child_end: int32[m] one past the last child (−1 for
+    a leaf), so kernels that split a node need no level bounds; descend:
     int32[m] the child a traversal opening the node goes to (its first child, past cells with a
     single child, which repeat their child's disk; −1 for a leaf); parent: int32[m] (−1 for the
     root); next: int32[m] where a traversal goes when the node's subtree is done (−1: the end);
@@ -53,6 +56,7 @@ class Nodes:
     radius: wp.array(dtype=wp.float32)
     leaves: wp.array(dtype=wp.float32)
     first_child: wp.array(dtype=wp.int32)
+    child_end: wp.array(dtype=wp.int32)
     descend: wp.array(dtype=wp.int32)
     parent: wp.array(dtype=wp.int32)
     next: wp.array(dtype=wp.int32)
@@ -202,11 +206,14 @@ def _place_kernel(offset: int, child0: int, node0: int, parent_local: wp.array(d
 
 @wp.kernel
 def _descend_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
-                    first_child: wp.array(dtype=wp.int32), descend: wp.array(dtype=wp.int32)):
-    """Where opening a node leads, from the level below (already set)."""
+                    first_child: wp.array(dtype=wp.int32), child_end: wp.array(dtype=wp.int32),
+                    descend: wp.array(dtype=wp.int32)):
+    """Where opening a node leads, from the level below (already set), and its child range's end."""
     g = node0 + wp.tid() + offset
     c = first_child[g]
-    if _child_end(g, level_end, child_level_end, first_child) - c == 1 and descend[c] >= 0:
+    end = _child_end(g, level_end, child_level_end, first_child)
+    child_end[g] = end
+    if end - c == 1 and descend[c] >= 0:
         descend[g] = descend[c]
     else:
         descend[g] = c
@@ -263,8 +270,8 @@ def build(problem) -> Tree:
     t = Nodes()
     t.position, t.normal = (wp.empty(m, dtype=wp.vec3, device=d) for _ in range(2))
     t.spread, t.area, t.radius, t.leaves = (wp.empty(m, dtype=wp.float32, device=d) for _ in range(4))
-    t.first_child, t.descend, t.parent, t.next, t.element = (wp.full(m, -1, dtype=wp.int32, device=d)
-                                                             for _ in range(5))
+    t.first_child, t.child_end, t.descend, t.parent, t.next, t.element = (
+        wp.full(m, -1, dtype=wp.int32, device=d) for _ in range(6))
     t.level = wp.zeros(m, dtype=wp.int32, device=d)
     t.root = m - 1
     for lv, (parent_local, first_local) in enumerate(links, start=1):
@@ -274,7 +281,7 @@ def build(problem) -> Tree:
     for lv in range(1, len(sizes)):
         device_mod.launch(_descend_kernel, sizes[lv],
                           [int(offsets[lv]), int(offsets[lv + 1]), int(offsets[lv]), t.first_child,
-                           t.descend],
+                           t.child_end, t.descend],
                           dev)
     for lv in range(len(sizes) - 2, -1, -1):
         device_mod.launch(_next_kernel, sizes[lv],
@@ -320,8 +327,9 @@ def _scatter_kernel(offset: int, element: wp.array(dtype=wp.int32), per_element:
     values[k] = per_element[element[k]]
 
 
-def node_means(tree: Tree, per_element: np.ndarray, out: wp.array | None = None) -> wp.array:
-    """vec3[m]: area-weighted mean of ``per_element`` (float32[n,3]) over each node's subtree.
+def node_means(tree: Tree, per_element, out: wp.array | None = None) -> wp.array:
+    """vec3[m]: area-weighted mean of ``per_element`` (float32[n,3], or vec3[n] on the device) over
+    each node's subtree.
 
     ``out`` (vec3[m]) is reused when given, so repeated calls in one bake allocate nothing new.
     """
@@ -329,11 +337,10 @@ def node_means(tree: Tree, per_element: np.ndarray, out: wp.array | None = None)
     d = dev.name
     if out is None:
         out = wp.empty(tree.count, dtype=wp.vec3, device=d)
+    if not isinstance(per_element, wp.array):
+        per_element = wp.array(np.ascontiguousarray(per_element, np.float32), dtype=wp.vec3, device=d)
     offs = tree.level_offsets
-    device_mod.launch(_scatter_kernel, int(offs[1]),
-                      [tree.nodes.element,
-                       wp.array(np.ascontiguousarray(per_element, np.float32), dtype=wp.vec3, device=d),
-                       out], dev)
+    device_mod.launch(_scatter_kernel, int(offs[1]), [tree.nodes.element, per_element, out], dev)
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_mean_kernel, int(offs[lv + 1] - offs[lv]),
                           [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), tree.nodes, out], dev)

@@ -30,8 +30,8 @@ class BakeResult:
     direct, indirect: its two parts.
     output: the content the settings asked for (lighting, combined, indirect or ao: accessibility
     in all three channels).
-    corner_vertex: int32[T,3], the shading vertex of each scene triangle corner (where a mesh
-    vertex's corners get their values).
+    shading: the ``core.elements.ShadingVertices`` the values are per (its ``corner``: the shading
+    vertex of each scene triangle corner, where a mesh vertex's corners get their values).
     timings: seconds per stage; counts: objects, triangles, elements, lamps, rays, pairs, iterations.
     lightmap: the lightmap pages (``core.lightmap.LightmapResult``) when a lightmap was requested.
     """
@@ -40,7 +40,7 @@ class BakeResult:
     direct: np.ndarray
     indirect: np.ndarray
     output: np.ndarray
-    corner_vertex: np.ndarray
+    shading: object
     device: str
     timings: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
@@ -60,35 +60,72 @@ def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = 
     lightmap: a ``core.lightmap.LightmapRequest``: its objects are also unwrapped, rasterised and
     evaluated per texel into ``BakeResult.lightmap``.
     """
-    stages = Stages(progress, cancel, notify)
-    for name in settings.unread():
-        stages.warn(f"{flag(name)} is not used by method {settings.solver}")
-    problem = Problem(scene, settings, stages)
-    info = solvers.SOLVERS[settings.solver]
-    solver = solvers.get(settings.solver)
-    for message in getattr(solver, "check", lambda p: [])(problem):
-        stages.warn(message)
-    solution = stages.run("solve", solver.solve, problem)
-    problem.counts["rays"] += int(solution.counts.get("rays", 0))
-    problem.counts.update({k: v for k, v in solution.counts.items() if k != "rays"})
+    return Sequence(settings, progress, cancel, notify).bake(scene, lightmap)
 
-    vertices = receivers_mod.at_elements(problem)
-    none = np.zeros((len(vertices), 3), np.float32)
-    direct = problem.direct if info.light else none  # AO needs no light
-    field_values = solver.evaluate(problem, solution, vertices)
-    indirect = field_values if info.light else none
-    output = receivers_mod.compose(settings.baked_content, field_values, direct, vertices)
 
-    lightmap_result = None
-    if lightmap is not None:
-        from .lightmap import bake_lightmaps
+class Sequence:
+    """Bakes the frames of an animation one after another (or one scene, as :func:`bake` does),
+    reusing what carries over from one frame to the next: while the topology (and the split into
+    shading vertices) stays, the problem (its device arrays updated, the BVH and the tree refitted:
+    ``Problem.move``) and the previous frame's solution, which solvers that iterate start from
+    (``problem.previous``).
 
-        lightmap_result = bake_lightmaps(lightmap, problem, solver, solution)
-        problem.counts["texels"] = lightmap_result.texels
-    return BakeResult(lighting=(direct + indirect).astype(np.float32), direct=direct, indirect=indirect,
-                      output=output, corner_vertex=problem.shading.corner, device=problem.device.name,
-                      timings=stages.timings, counts=problem.counts, warnings=stages.warnings,
-                      peak_memory_bytes=_peak_rss_bytes(), lightmap=lightmap_result)
+    progress, cancel, notify: as for :func:`bake`; ``bake(scene, label=…)`` prefixes the stages it
+    reports with the label (e.g. the frame).
+    """
+
+    def __init__(self, settings: Settings, progress: Optional[ProgressFn] = None, cancel=None,
+                 notify: Optional[Callable[[str], None]] = None):
+        self.settings = settings
+        self._progress = progress
+        self._cancel = cancel
+        self._notify = notify
+        self.problem: Optional[Problem] = None
+        self._solution = None
+
+    def bake(self, scene: SceneData, lightmap=None, label: str = "") -> BakeResult:
+        """Bake one frame; see :func:`bake`."""
+        progress = self._progress
+        if label and progress is not None:
+            progress = (lambda stage, fraction, p=progress: p(f"{label}: {stage}", fraction))
+        stages = Stages(progress, self._cancel, self._notify)
+        settings = self.settings
+        for name in settings.unread():
+            stages.warn(f"{flag(name)} is not used by method {settings.solver}")
+        problem = self.problem
+        shading = problem.shading_of(scene) if problem is not None else None
+        if shading is not None:
+            problem.stages = stages
+            stages.run("move", problem.move, scene, shading)
+            problem.previous = self._solution
+        else:
+            problem = self.problem = Problem(scene, settings, stages)
+        info = solvers.SOLVERS[settings.solver]
+        solver = solvers.get(settings.solver)
+        for message in getattr(solver, "check", lambda p: [])(problem):
+            stages.warn(message)
+        solution = self._solution = stages.run("solve", solver.solve, problem)
+        problem.counts["rays"] += int(solution.counts.get("rays", 0))
+        problem.counts.update({k: v for k, v in solution.counts.items() if k != "rays"})
+
+        vertices = receivers_mod.at_elements(problem)
+        none = np.zeros((len(vertices), 3), np.float32)
+        direct = problem.direct if info.light else none  # AO needs no light
+        field_values = solver.evaluate(problem, solution, vertices)
+        indirect = field_values if info.light else none
+        output = receivers_mod.compose(settings.baked_content, field_values, direct, vertices)
+
+        lightmap_result = None
+        if lightmap is not None:
+            from .lightmap import bake_lightmaps
+
+            lightmap_result = bake_lightmaps(lightmap, problem, solver, solution)
+            problem.counts["texels"] = lightmap_result.texels
+        return BakeResult(lighting=(direct + indirect).astype(np.float32), direct=direct,
+                          indirect=indirect, output=output, shading=problem.shading,
+                          device=problem.device.name, timings=stages.timings,
+                          counts=dict(problem.counts), warnings=stages.warnings,
+                          peak_memory_bytes=_peak_rss_bytes(), lightmap=lightmap_result)
 
 
 def _peak_rss_bytes() -> int:

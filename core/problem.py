@@ -4,7 +4,8 @@ It holds the scene (recentred: see ``SceneData.recentred``), the settings, the d
 (progress, cancellation, timings, warnings), the shading vertices and elements, and everything the
 kernels read, uploaded to the device once: the BVH of all triangles, the lights, and the elements
 as one ``Surfels`` struct. Direct light per element, the cluster tree and (for link-based
-solvers) links are computed the first time they are asked for and kept.
+solvers) links are computed the first time they are asked for and kept (links per oracle, until
+the scene moves).
 """
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ from .errors import BakeError
 from .scene import SceneData
 from .settings import Settings
 from .stages import Stages
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
 
 @wp.struct
@@ -93,16 +96,30 @@ class Problem:
         s.fan_offsets = wp.array(els.fan_offsets, dtype=wp.int32, device=d)
         s.fan_triangles = wp.array(els.fan_triangles, dtype=wp.int32, device=d)
         self.surfels = s
+        # The solution of the previous frame of an animation (``pipeline.Sequence``), which
+        # iterating solvers start from; None for a first or single frame.
+        self.previous = None
+        self._links = {}
         self.counts = {"objects": len(scene.object_names), "triangles": scene.num_triangles,
                        "vertices": scene.num_vertices, "shading_vertices": self.shading.count,
                        "elements": els.count, "lamps": len(scene.lamps),
                        "emissive_triangles": self.lights.num_emitters, "rays": 0}
 
-    def move(self, scene: SceneData) -> None:
+    def shading_of(self, scene: SceneData):
+        """The shading vertices of ``scene`` when it has this problem's vertices, triangles and
+        split (so the problem can ``move`` to it), else None. A flat-shaded mesh that deforms can
+        change its split (coplanar faces stop being coplanar): its elements change then."""
+        if scene.num_vertices != self.scene.num_vertices or not np.array_equal(scene.triangles,
+                                                                                self.scene.triangles):
+            return None
+        shading = elements_mod.shading_vertices(scene)
+        return shading if np.array_equal(shading.corner, self.shading.corner) else None
+
+    def move(self, scene: SceneData, shading=None) -> None:
         """Take the positions, normals, materials and lamps of ``scene`` — the same triangles and
         vertices, deformed or moved (an animation frame) — keeping this problem's frame, device
-        arrays and BVH (refitted), and the tree (refitted) if built. Direct light is traced again
-        when next asked for."""
+        arrays and BVH (refitted) and the tree (refitted) if built; ``shading``: the scene's split
+        when known (``shading_of``). Direct light is traced again when next asked for."""
         if (scene.num_vertices, scene.num_triangles) != (self.scene.num_vertices, self.scene.num_triangles):
             raise BakeError("the scene's topology changed: build a new problem")
         try:
@@ -114,9 +131,11 @@ class Problem:
         lamps = replace(scene.lamps, position=(np.asarray(scene.lamps.position, np.float64)
                                                 + shift).astype(np.float32))
         self.scene = scene = replace(scene, positions=positions, lamps=lamps, origin=self.scene.origin)
-        self.shading = elements_mod.shading_vertices(scene)
-        if self.shading.count != self.elements.count:
-            raise BakeError("the scene's shading topology changed: build a new problem")
+        shading = shading if shading is not None else elements_mod.shading_vertices(scene)
+        if not np.array_equal(shading.corner, self.shading.corner):
+            raise BakeError("the scene's shading vertices changed: build a new problem")
+        # the split is the scene's; its positions are taken in this problem's frame
+        self.shading = shading = replace(shading, position=np.ascontiguousarray(positions[shading.vertex]))
         self.elements = els = elements_mod.build(scene, self.shading)
         self.mesh.points.assign(positions)
         self.mesh.refit()
@@ -126,6 +145,8 @@ class Problem:
             getattr(s, name).assign(getattr(els, {"pos": "position", "nrm": "normal"}.get(name, name)))
         s.area.assign(els.area)
         self.__dict__.pop("direct", None)
+        self.counts["rays"] = 0
+        self._links.clear()  # links are made again from scratch over the refitted tree
         if "tree" in self.__dict__:
             from . import hierarchy
 
@@ -153,6 +174,21 @@ class Problem:
         tree = self.stages.run("hierarchy", hierarchy.build, self)
         self.counts["nodes"] = tree.count
         return tree
+
+    def links(self, oracle, radiance=None):
+        """The links over ``tree`` chosen by ``oracle`` (``links.Oracle``, the cache key), built the
+        first time each is asked for and kept until the scene moves (``links.Links``).
+        ``radiance()`` gives the first radiance estimate (float32[n,3]) an oracle with
+        ``brightness`` is built with; it is called only when the links are built."""
+        if oracle not in self._links:
+            from . import links as links_mod
+
+            estimate = radiance() if radiance is not None else None
+            made = self.stages.run("links", links_mod.build, self, oracle, estimate)
+            self.counts["links"] = made.count
+            self.counts["rays"] += made.rays_traced
+            self._links[oracle] = made
+        return self._links[oracle]
 
 
 def _mesh(scene: SceneData, device: str) -> wp.Mesh:

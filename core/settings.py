@@ -9,6 +9,7 @@ and how).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from typing import Optional
 
@@ -100,6 +101,7 @@ class Option:
     length: bool = False
     folder: bool = False
     digits: Optional[int] = None
+    placeholder: Optional[str] = None
 
 
 def _option(default, label, help, group, **kwargs):
@@ -110,7 +112,7 @@ def _option(default, label, help, group, **kwargs):
 class Settings:
     """Bake settings; see each field's Option (``option(name)``) for its meaning and range."""
 
-    method: str = _option("reference", "Method", "how light transport is computed", "solver",
+    method: str = _option("hierarchical", "Method", "how light transport is computed", "solver",
                           choices=METHODS)
     content: str = _option("lighting", "Content", "which quantity is baked", "output",
                            choices=CONTENTS)
@@ -127,8 +129,9 @@ class Settings:
                                    "the emitters; auto: exact for up to 16 emitters or while "
                                    "receivers × emitters stay under 16 million, else the tree", "solver",
                                    choices=LIGHT_SELECTIONS)
-    visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair for the "
-                                   "visibility of indirect light", "solver", low=1, high=255,
+    visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair (reference) or "
+                                   "link (hierarchical) for the visibility of indirect light",
+                                   "solver", low=1, high=255,
                                    soft_high=64, flag="--rays")
     bounces: int = _option(64, "Bounces", "at most this many indirect bounces (sweeps)", "solver",
                            low=1, soft_high=128)
@@ -138,8 +141,19 @@ class Settings:
     max_pairs: int = _option(16_000_000, "Max Pairs", "memory budget of the all-pairs transport, "
                              "in element pairs at 4 bytes each (the visibility alone takes 1 "
                              "byte a pair)", "solver", low=1)
+    link_threshold: float = _option(0.1, "Link Threshold", "largest unoccluded transfer (form "
+                                    "factor bound) a link between two element clusters may carry; "
+                                    "smaller makes more, finer links (slower, more accurate)",
+                                    "solver", low=1e-5, high=1.0, digits=4)
+    link_memory: int = _option(4096, "Link Memory", "memory budget of the links (MB); a scene that "
+                               "would need more gets coarser links, with a warning", "solver",
+                               low=1, soft_high=65536)
     seed: int = _option(1, "Seed", "random seed of the sample jitter (results are deterministic "
                         "for a seed)", "solver", low=0)
+    frames: str = _option("", "Frames", "frame range A:B[:STEP] to bake as an animation, each "
+                          "frame into its own attribute or lightmap image of a sequence (empty: "
+                          "the current frame; the panel's Bake Animation button: the scene's frame "
+                          "range)", "output", placeholder="A:B[:STEP]")
     bake_copy: bool = _option(False, "Bake Copy", "when modifiers change an object's vertex count, "
                               "bake into a new object '<name>_baked' instead of skipping it",
                               "output")
@@ -204,16 +218,31 @@ class Settings:
             raise SettingsError("attribute name must not be empty")
         if self.target != "vertex_colors" and not self.output.strip():
             raise SettingsError("output folder must not be empty when baking lightmaps")
+        self.frame_list()
         if self.content == "indirect" and not SOLVERS[self.solver].indirect:
             raise SettingsError(f"content indirect needs a method with indirect light; method "
                                 f"{self.method} computes none (it would bake black)")
         return self
 
+    def frame_list(self) -> Optional[list[int]]:
+        """The frames of ``frames`` (A:B or A:B:STEP, B included), None when empty; raises
+        SettingsError for anything else."""
+        text = self.frames.strip()
+        if not text:
+            return None
+        try:
+            parts = [int(x) for x in text.split(":")]
+        except ValueError:
+            parts = []
+        if len(parts) not in (2, 3) or parts[1] < parts[0] or (len(parts) == 3 and parts[2] < 1):
+            raise SettingsError(f"frames must be A:B or A:B:STEP with A ≤ B and STEP ≥ 1, not {text!r}")
+        return list(range(parts[0], parts[1] + 1, parts[2] if len(parts) == 3 else 1))
+
     def unread(self) -> list[str]:
         """Settings changed from their defaults that the chosen solver does not read (for a
         warning: a bunnell bake ignores --bounces)."""
         return [f.name for f in fields(self)
-                if getattr(self, f.name) != f.default and not reads(self.solver, f.name)]
+                if not _same(getattr(self, f.name), f.default) and not reads(self.solver, f.name)]
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -221,6 +250,13 @@ class Settings:
     def group(self, name: str) -> dict:
         """{field: value} of the settings read by ``name`` (one of GROUPS)."""
         return {f.name: getattr(self, f.name) for f in fields(self) if option(f.name).group == name}
+
+
+def _same(value, default) -> bool:
+    """A setting left at its default; floats to single precision (Blender's float properties)."""
+    if isinstance(default, float) and isinstance(value, float):
+        return math.isclose(value, default, rel_tol=1e-6, abs_tol=1e-12)
+    return value == default
 
 
 def option(name: str) -> Option:
@@ -251,6 +287,8 @@ def metavar(name: str) -> Optional[str]:
     """The placeholder of Settings field ``name``'s value on the command line (None: a switch or
     a choice)."""
     opt, default = option(name), _DEFAULTS[name]
+    if opt.placeholder is not None:
+        return opt.placeholder
     if opt.choices is not None or isinstance(default, bool):
         return None
     if isinstance(default, (int, float)):

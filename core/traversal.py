@@ -5,18 +5,25 @@ the node it uses as a whole (1: the node stands for its subtree, which is skippe
 between: a blend, the children carrying the rest of the node's weight). The weight of the node a
 traversal stands at is kept per tree level, so one ``while`` loop per receiver needs no stack:
 
-    cut = cut_begin(nodes)
+    cut = cut_begin(t.root, t.level[t.root])
     while cut.node >= 0:
-        w = cut_weight(nodes, cut)
+        node = cut.node
+        level = t.level[node]
+        w = cut_weight(cut, level)
         take = ...           # an opening criterion, e.g. opening(...)
         ...                  # accumulate the node's contribution × w × take
-        cut = cut_advance(nodes, cut, take)
+        child = t.descend[node]
+        cut = cut_advance(cut, level, child, t.level[wp.max(child, 0)], t.next[node], take)
 
-Gathers (AO, Bunnell, final gathers) and link creation share these pieces.
+The functions take the few node fields they need rather than the ``Nodes`` struct: Warp passes
+structs by value, and copying a dozen array handles at every visited node costs more than the
+visit. Gathers (AO, Bunnell, final gathers) and link creation share these pieces.
 """
 import warp as wp
 
-from .hierarchy import MAX_LEVELS, Nodes
+from .hierarchy import MAX_LEVELS
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
 levels_vec = wp.types.vector(length=MAX_LEVELS, dtype=wp.float32)
 
@@ -31,41 +38,41 @@ class Cut:
 
 
 @wp.func
-def cut_begin(t: Nodes) -> Cut:
-    """A traversal at the root, with weight 1."""
+def cut_begin(root: int, root_level: int) -> Cut:
+    """A traversal at the root (its index and level), with weight 1."""
     c = Cut()
-    c.node = t.root
+    c.node = root
     c.weights = levels_vec()
-    c.weights[t.level[t.root]] = 1.0
+    c.weights[root_level] = 1.0
     return c
 
 
 @wp.func
-def cut_weight(t: Nodes, c: Cut) -> float:
-    """The weight of the node ``c`` stands at: the product of (1 − take) of its blended ancestors."""
-    return c.weights[t.level[c.node]]
+def cut_weight(c: Cut, level: int) -> float:
+    """The weight of the node ``c`` stands at (of tree level ``level``): the product of (1 − take)
+    of its blended ancestors."""
+    return c.weights[level]
 
 
 @wp.func
-def cut_advance(t: Nodes, c: Cut, take: float) -> Cut:
-    """Move on from ``c.node``, having used the fraction ``take`` of it: past its subtree for a leaf
-    or take ≥ 1, else down to its children with the rest of its weight."""
+def cut_advance(c: Cut, level: int, child: int, child_level: int, nxt: int, take: float) -> Cut:
+    """Move on from ``c.node`` (of ``level``; its ``descend`` child, of ``child_level``, −1 for a
+    leaf; ``nxt`` its ``next``), having used the fraction ``take`` of it: past its subtree for a
+    leaf or take ≥ 1, else down to its children with the rest of its weight."""
     out = c
-    node = c.node
-    child = t.descend[node]
     if child < 0 or take >= 1.0:
-        out.node = t.next[node]
+        out.node = nxt
     else:
-        out.weights[t.level[child]] = c.weights[t.level[node]] * (1.0 - take)
+        out.weights[child_level] = c.weights[level] * (1.0 - take)
         out.node = child
     return out
 
 
 @wp.func
-def cut_skip(t: Nodes, c: Cut) -> Cut:
-    """Move past ``c.node``'s subtree without using it (culled)."""
+def cut_skip(c: Cut, nxt: int) -> Cut:
+    """Move past ``c.node``'s subtree without using it (culled); ``nxt`` its ``next``."""
     out = c
-    out.node = t.next[c.node]
+    out.node = nxt
     return out
 
 

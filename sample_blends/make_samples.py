@@ -1,4 +1,5 @@
-"""Make the sample scenes: ``cornell_box.blend`` and ``lamp_scene.blend`` next to this script.
+"""Make the sample scenes: ``cornell_box.blend``, ``lamp_scene.blend`` and ``animated_room.blend``
+next to this script.
 
 Run with the bpy module:  .venv/bin/python sample_blends/make_samples.py
 
@@ -7,6 +8,9 @@ Blender's z-up by the rotation (x, y, z) -> (x, -z, y): the open front faces +Y,
 down −Y into it, the red wall is on the camera's left, the green wall on its right. Surfaces are
 subdivided grids (real vertices, no modifiers) so per-vertex bakes have something to resolve.
 Lamp scene: a floor, three objects and one lamp of each type (point, spot, sun, area).
+Animated room: a floor and two walls, a column bent by a two-bone armature over frames 1–48 (a
+"character" deforming), a door panel swinging open and a point lamp sliding along the room, for
+frame-range bakes (``--frames 1:48``).
 """
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 CORNELL_PATH = HERE / "cornell_box.blend"
 LAMP_SCENE_PATH = HERE / "lamp_scene.blend"
+ANIMATED_PATH = HERE / "animated_room.blend"
 
 WHITE = (0.73, 0.73, 0.73)
 RED = (0.65, 0.05, 0.05)
@@ -57,6 +62,8 @@ CORNELL_VERTEX_RANGE = (2000, 4000)
 LAMP_SCENE_LAMPS = {"Point": "POINT", "Spot": "SPOT", "Sun": "SUN", "Area": "AREA"}
 LAMP_SCENE_MESHES = ("Floor", "Cube", "Sphere", "Pillar")
 LAMP_SCENE_VERTEX_RANGE = (1500, 3000)
+ANIMATED_FRAMES = (1, 48)
+ANIMATED_MESHES = ("Floor", "BackWall", "SideWall", "Column", "Door")
 
 
 def cornell_to_blender(points_mm) -> np.ndarray:
@@ -229,10 +236,83 @@ def make_lamp_scene() -> None:
     bpy.ops.wm.save_as_mainfile(filepath=str(LAMP_SCENE_PATH), compress=True)
 
 
+def animated_room(scene, cell: float = 0.1, frames: tuple = ANIMATED_FRAMES) -> None:
+    """Build the animated room into ``scene``: grids of ``cell`` metres, animated over ``frames``
+    (first, last): the column bends 60° at its middle, the door swings 80° open, the lamp slides
+    2 m along x."""
+    first, last = frames
+    white, red = principled("White", (0.7, 0.7, 0.7)), principled("Red", (0.7, 0.15, 0.1))
+    inside = np.array([0.0, 0.0, 1.25])
+    for name, quad, mat in (
+            ("Floor", [(-2.5, -2.0, 0.0), (2.5, -2.0, 0.0), (2.5, 2.0, 0.0), (-2.5, 2.0, 0.0)], white),
+            ("BackWall", [(-2.5, 2.0, 0.0), (2.5, 2.0, 0.0), (2.5, 2.0, 2.5), (-2.5, 2.0, 2.5)], white),
+            ("SideWall", [(-2.5, -2.0, 0.0), (-2.5, 2.0, 0.0), (-2.5, 2.0, 2.5), (-2.5, -2.0, 2.5)], red)):
+        mesh_object(name, [facing(np.array(quad), inside)], cell, mat)
+    top = np.array([(-0.2, -0.2, 1.8), (0.2, -0.2, 1.8), (0.2, 0.2, 1.8), (-0.2, 0.2, 1.8)])
+    centre = top.mean(axis=0) * np.array([1.0, 1.0, 0.5])
+    column = mesh_object("Column", [facing(q, 2 * q.mean(axis=0) - centre) for q in [top, *box_sides(top)]],
+                         cell / 2, red)
+    door_top = np.array([(1.2, 1.0, 1.6), (2.0, 1.0, 1.6), (2.0, 1.06, 1.6), (1.2, 1.06, 1.6)])
+    centre = door_top.mean(axis=0) * np.array([1.0, 1.0, 0.5])
+    door = mesh_object("Door", [facing(q, 2 * q.mean(axis=0) - centre) for q in [door_top, *box_sides(door_top)]],
+                       cell, white)
+    # the door swings about its edge at x = 1.2
+    door.data.transform(np.array([[1, 0, 0, -1.2], [0, 1, 0, -1.0], [0, 0, 1, 0], [0, 0, 0, 1]]))
+    door.location = (1.2, 1.0, 0.0)
+    door.rotation_euler = (0.0, 0.0, 0.0)
+    door.keyframe_insert("rotation_euler", frame=first)
+    door.rotation_euler = (0.0, 0.0, math.radians(-80.0))
+    door.keyframe_insert("rotation_euler", frame=last)
+
+    arm = bpy.data.armatures.new("Rig")
+    rig = bpy.data.objects.new("Rig", arm)
+    scene.collection.objects.link(rig)
+    bpy.context.view_layer.objects.active = rig
+    bpy.ops.object.mode_set(mode="EDIT")
+    lower, upper = arm.edit_bones.new("Lower"), arm.edit_bones.new("Upper")
+    lower.head, lower.tail = (0.0, 0.0, 0.0), (0.0, 0.0, 0.9)
+    upper.head, upper.tail = (0.0, 0.0, 0.9), (0.0, 0.0, 1.8)
+    upper.parent, upper.use_connect = lower, True
+    bpy.ops.object.mode_set(mode="OBJECT")
+    heights = np.array([v.co.z for v in column.data.vertices])
+    w_upper = np.clip((heights - 0.7) / 0.4, 0.0, 1.0)  # blended over 0.7–1.1 m
+    for name, weights in (("Lower", 1.0 - w_upper), ("Upper", w_upper)):
+        group = column.vertex_groups.new(name=name)
+        for index, weight in enumerate(weights):
+            if weight > 0.0:
+                group.add([index], float(weight), "REPLACE")
+    column.modifiers.new("Armature", "ARMATURE").object = rig
+    bone = rig.pose.bones["Upper"]
+    bone.rotation_mode = "XYZ"
+    bone.rotation_euler = (0.0, 0.0, 0.0)
+    bone.keyframe_insert("rotation_euler", frame=first)
+    bone.rotation_euler = (math.radians(60.0), 0.0, 0.0)
+    bone.keyframe_insert("rotation_euler", frame=last)
+
+    light = bpy.data.lights.new("Lamp", "POINT")
+    light.energy, light.shadow_soft_size = 400.0, 0.1
+    lamp = bpy.data.objects.new("Lamp", light)
+    scene.collection.objects.link(lamp)
+    lamp.location = (-1.0, -0.5, 2.2)
+    lamp.keyframe_insert("location", frame=first)
+    lamp.location = (1.0, -0.5, 2.2)
+    lamp.keyframe_insert("location", frame=last)
+    scene.frame_start, scene.frame_end = first, last
+    scene.frame_set(first)
+
+
+def make_animated_room() -> None:
+    scene = empty_file()
+    animated_room(scene)
+    add_camera(scene, (0.0, -6.5, 2.0), (80.0, 0.0, 0.0), lens=30.0)
+    bpy.ops.wm.save_as_mainfile(filepath=str(ANIMATED_PATH), compress=True)
+
+
 def main() -> None:
     make_cornell_box()
     make_lamp_scene()
-    for path in (CORNELL_PATH, LAMP_SCENE_PATH):
+    make_animated_room()
+    for path in (CORNELL_PATH, LAMP_SCENE_PATH, ANIMATED_PATH):
         print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")
 
 

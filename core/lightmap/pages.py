@@ -42,11 +42,14 @@ class LightmapTarget:
 @dataclass
 class LightmapRequest:
     """What to lightmap. python: interpreter for the xatlas worker (default sys.executable);
-    cache_dir: unwrap cache (default ``unwrap.default_cache_dir()``)."""
+    cache_dir: unwrap cache (default ``unwrap.default_cache_dir()``); sizes: {layout group: {page
+    index: (page size, density)}} to keep for reused UVs (an animation's later frames keep the
+    first frame's pages, ``LightmapResult.sizes``), None to size them by the density."""
 
     targets: list
     python: Optional[str] = None
     cache_dir: Optional[Path] = None
+    sizes: Optional[dict] = None
 
 
 @dataclass
@@ -79,7 +82,8 @@ class LightmapResult:
     """pages; uv: {mesh name: float32[C,2]} layouts made by this bake (to write as ``Lightmap``;
     a tile set's UVs lie in their tiles, u + k for the k-th page); seam_error: largest difference
     across smooth UV seams relative to the brightest texel of its page (0 without seams); texels:
-    covered texels; warnings; densities: {object: (asked, used)} texels per metre."""
+    covered texels; warnings; densities: {object: (asked, used)} texels per metre; sizes: {layout
+    group: {page index: (page size, density)}} (see ``LightmapRequest.sizes``)."""
 
     pages: list
     uv: dict
@@ -87,6 +91,7 @@ class LightmapResult:
     texels: int = 0
     warnings: list = field(default_factory=list)
     densities: dict = field(default_factory=dict)
+    sizes: dict = field(default_factory=dict)
 
     def report(self) -> dict:
         """What a bake report says of the lightmaps: each page (image, UDIM tile, size, objects)
@@ -232,6 +237,7 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
     made: dict[str, np.ndarray] = {}  # per mesh laid out now: its corner UVs to write (tile offsets in)
     densities: dict[str, tuple] = {}  # per object: (asked, used) texels per metre
     pages = []  # (image name, UDIM tile or None, objects, size, density, targets on it)
+    sizes: dict[str, dict] = {}  # per layout group: {page index: (size, density)}
     fresh = [g for g in groups if g.unwrap]
     if fresh:
         layouts = stages.run("unwrap", unwrap.unwrap,
@@ -252,8 +258,8 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
                                     f"chart seam are distorted; triangulate the mesh for exact charts")
             for index, size in enumerate(layout.sizes):
                 members = [o for o, k in zip(g.owners, layout.page) if k == index]
-                pages += _pages(g, UDIM_FIRST + index if tiled else None, members, size,
-                                min(densities[o.object_name][1] for o in members))
+                sizes.setdefault(g.name, {})[index] = (size, min(densities[o.object_name][1] for o in members))
+                pages += _pages(g, UDIM_FIRST + index if tiled else None, members, *sizes[g.name][index])
     for g in groups:
         if g.unwrap:
             continue
@@ -263,14 +269,19 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
             tile = _tile_of(uv[o.corner_triangles])
             uvs[o.mesh_name] = uv - _tile_offset(tile)
             tiles.setdefault(tile, []).append(o)
-        sides = {tile: _page_side(members, scene, uvs, settings) for tile, members in tiles.items()}
-        side = max(size[0] for size, _ in sides.values())
+        kept = (request.sizes or {}).get(g.name, {})
+        if set(tiles) <= set(kept):  # an animation's later frame: the first frame's pages
+            sizes[g.name] = {tile: kept[tile] for tile in tiles}
+        else:
+            sides = {tile: _page_side(members, scene, uvs, settings) for tile, members in tiles.items()}
+            side = max(size[0] for size, _ in sides.values())
+            sizes[g.name] = {tile: ((side, side), sides[tile][1] * side / sides[tile][0][0]) for tile in tiles}
         for tile, members in sorted(tiles.items()):
-            density = sides[tile][1] * side / sides[tile][0][0]
+            size, density = sizes[g.name][tile]
             for o in members:
                 for t in g.objects[o.mesh_name]:
                     densities[t.object_name] = (_asked(o, settings), density)
-            pages += _pages(g, UDIM_FIRST + tile if len(tiles) > 1 else None, members, (side, side), density)
+            pages += _pages(g, UDIM_FIRST + tile if len(tiles) > 1 else None, members, size, density)
     for name, (asked, used) in densities.items():
         if used < asked * 0.999:
             others = "" if settings.atlas_pages == "many" else " with the others"
@@ -333,7 +344,7 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
         stages.warn(message)
     result = LightmapResult(pages=result_pages, uv=made, seam_error=seam_error,
                           texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings,
-                          densities=densities)
+                          densities=densities, sizes=sizes)
     problem.counts["lightmap"] = result.report()
     return result
 

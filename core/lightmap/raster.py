@@ -16,6 +16,8 @@ from .. import device as device_mod
 from ..formfactor import tangent_frame
 from ..rays import lift
 
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 # Half a texel's diagonal (texel units): a triangle within this distance of a texel's centre
 # overlaps the texel.
 REACH = 0.7072
@@ -146,8 +148,9 @@ def rasterize(tri_uv: np.ndarray, width: int, height: int, dev: device_mod.Devic
     best = wp.full(n, 1.0e30, dtype=wp.float32, device=d)
     owner = wp.full(n, _NONE, dtype=wp.int32, device=d)
     t = uv.shape[0]
-    for claim in (0, 1):
-        device_mod.launch(_raster_kernel, t, [*corners, width, height, REACH, claim, best, owner], dev)
+    for claim in (0, 1):  # neighbouring triangles meet on texels through atomic_min: one thread
+        device_mod.launch(_raster_kernel, t, [*corners, width, height, REACH, claim, best, owner], dev,
+                          serial=True)
     owner_np = owner.numpy()
     index = np.flatnonzero(owner_np != _NONE).astype(np.int64)
     tri = owner_np[index].astype(np.int32)

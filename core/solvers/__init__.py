@@ -39,6 +39,10 @@ SOLVERS = {info.name: info for info in (
     SolverInfo("reference", "Direct light plus multi-bounce indirect light over all element pairs "
                "with ray-cast visibility (ground truth, small scenes)",
                reads=("visibility_rays", "bounces", "tolerance", "max_pairs", "texel_indirect")),
+    SolverInfo("hierarchical", "Direct light plus multi-bounce indirect light over links between "
+               "element clusters with ray-cast visibility (accurate, large scenes)",
+               reads=("visibility_rays", "bounces", "tolerance", "link_threshold", "link_memory",
+                      "texel_indirect")),
     SolverInfo("bunnell", "Direct light plus one bounce of indirect light gathered over a disk "
                "hierarchy (fast, large scenes, approximate)", reads=("texel_indirect",)),
     SolverInfo("ao", "Ambient occlusion: the unoccluded fraction of the hemisphere within the AO "

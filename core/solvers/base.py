@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
 
 
 @dataclass
@@ -16,6 +17,35 @@ class Solution:
     values: np.ndarray
     counts: dict = field(default_factory=dict)
     cache: dict = field(default_factory=dict)
+
+
+def iterate(problem, sweep, sweeps: int) -> tuple[np.ndarray, int, wp.array, wp.array]:
+    """Jacobi sweeps ``sweep(direct, current, out, k)`` (vec3[n] device arrays: the problem's
+    direct lighting, the indirect lighting so far, the next; k the sweep's number from 1) until the
+    largest change is below ``tolerance`` × the largest lighting value, or ``sweeps`` of them.
+    Returns (float32[n,3] the last indirect lighting, sweeps made, the direct lighting and the
+    last indirect lighting on the device). An animation's previous frame (``problem.previous``)
+    is the starting point: its light has mostly converged already."""
+    settings, stages, direct = problem.settings, problem.stages, problem.direct
+    d = problem.device.name
+    n = problem.elements.count
+    dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
+    before = problem.previous.values if problem.previous is not None else np.zeros((n, 3), np.float32)
+    current = wp.array(before, dtype=wp.vec3, device=d)
+    nxt = wp.zeros(n, dtype=wp.vec3, device=d)
+    scale_direct = float(np.abs(direct).max(initial=0.0))
+    made = 0
+    for made in range(1, sweeps + 1):
+        sweep(dev_direct, current, nxt, made)
+        current, nxt = nxt, current
+        now = current.numpy()
+        change = float(np.abs(now - before).max(initial=0.0))
+        scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
+        before = now
+        stages.report("bounces", made / settings.bounces)
+        if change <= settings.tolerance * scale:
+            break
+    return before, made, dev_direct, current
 
 
 def reconstruct(problem, solution: Solution, receivers) -> np.ndarray:

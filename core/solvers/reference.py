@@ -23,7 +23,9 @@ from ..errors import BakeError
 from ..formfactor import disk_ff, fan_ff
 from ..problem import Surfels
 from ..rays import lift
-from .base import Solution, reconstruct_with_detail
+from .base import Solution, iterate, reconstruct_with_detail
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
 # Below this many disk areas of squared distance the disk approximation is replaced by the
 # exact form factor of the sender's triangles. ALGORITHMS.md §1 suggests 4–8 for a fast method;
@@ -47,11 +49,11 @@ def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
     inside a curved closed mesh."""
     total = float(0.0)
     for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        total += _triangle_area2(s, s.fan_triangles[k])
+        total += _triangle_area2(s.points, s.tris, s.fan_triangles[k])
     pick = u0 * total
     chosen = s.fan_triangles[s.fan_offsets[j]]
     for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        pick -= _triangle_area2(s, s.fan_triangles[k])
+        pick -= _triangle_area2(s.points, s.tris, s.fan_triangles[k])
         if pick <= 0.0:
             chosen = s.fan_triangles[k]
             break
@@ -65,19 +67,26 @@ def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
 
 
 @wp.func
-def _triangle_area2(s: Surfels, t: int) -> float:
-    a = s.points[s.tris[3 * t]]
-    return wp.length(wp.cross(s.points[s.tris[3 * t + 1]] - a, s.points[s.tris[3 * t + 2]] - a))
+def _triangle_area2(points: wp.array(dtype=wp.vec3), tris: wp.array(dtype=wp.int32), t: int) -> float:
+    """Twice the area of triangle t (the arrays, not the Surfels struct: Warp copies structs)."""
+    a = points[tris[3 * t]]
+    return wp.length(wp.cross(points[tris[3 * t + 1]] - a, points[tris[3 * t + 2]] - a))
 
 
 @wp.func
 def element_ff(s: Surfels, i: int, j: int) -> float:
     """Form factor from element i's point to the front of element j."""
-    p = s.pos[i]
+    return point_ff(s, s.pos[i], s.nrm[i], j)
+
+
+@wp.func
+def point_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int) -> float:
+    """Form factor from point p (unit normal n) to the front of element j: its disk far away, its
+    exact triangles when d² < NEAR·A_j."""
     d = s.pos[j] - p
     if wp.dot(d, d) < NEAR * s.area[j]:
-        return fan_ff(p, s.nrm[i], j, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-    return disk_ff(p, s.nrm[i], s.pos[j], s.nrm[j], s.area[j])
+        return fan_ff(p, n, j, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+    return disk_ff(p, n, s.pos[j], s.nrm[j], s.area[j])
 
 
 @wp.func
@@ -105,9 +114,10 @@ def pair_hits(s: Surfels, i: int, j: int, rays: int, seed: int) -> int:
 @wp.kernel
 def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: int,
                   matrix: wp.array2d(dtype=wp.float32), visibility: wp.array2d(dtype=wp.uint8),
-                  traced: wp.array(dtype=wp.int64)):
+                  traced: wp.array(dtype=wp.int32)):
     """Thread t fills rows t and n−1−t against every later column (the same work per thread):
-    M[i, j] and M[j, i] (``matrix``) or their shared visibility (``visibility``)."""
+    M[i, j] and M[j, i] (``matrix``) or their shared visibility (``visibility``); ``traced[t]``
+    counts its rays (no atomics: they are not atomic on the CPU)."""
     t = wp.tid() + offset
     count = int(0)
     for side in range(2):
@@ -131,15 +141,15 @@ def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
                 else:
                     visibility[i, j] = wp.uint8(hits)
                     visibility[j, i] = wp.uint8(hits)
-    wp.atomic_add(traced, 0, wp.int64(count))
+    traced[t] = count
 
 
 @wp.kernel
 def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: int,
                   matrix: wp.array2d(dtype=wp.float32), visibility: wp.array2d(dtype=wp.uint8),
                   direct: wp.array(dtype=wp.vec3), indirect: wp.array(dtype=wp.vec3),
-                  out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int64)):
-    """One Jacobi sweep of row i: out_i = Σ_j M_ij ρ_j (D_j + I_j)."""
+                  out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int32)):
+    """One Jacobi sweep of row i: out_i = Σ_j M_ij ρ_j (D_j + I_j); ``traced[i]`` its rays."""
     i = wp.tid() + offset
     acc = wp.vec3(0.0)
     count = int(0)
@@ -161,8 +171,7 @@ def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
             if m > 0.0:
                 acc += m * wp.cw_mul(s.albedo[j], direct[j] + indirect[j])
     out[i] = acc
-    if count > 0:
-        wp.atomic_add(traced, 0, wp.int64(count))
+    traced[i] = count
 
 
 class Transport:
@@ -174,8 +183,7 @@ class Transport:
         n = problem.elements.count
         self.problem = problem
         self.n = n
-        budget = 4 * int(settings.max_pairs)  # bytes
-        self.mode = MATRIX if 4 * n * n <= budget else VISIBILITY if n * n <= budget else TRACED
+        self.mode = _mode(n, settings.max_pairs)
         need = {MATRIX: 4 * n * n, VISIBILITY: n * n, TRACED: 0}[self.mode]
         free = device_mod.free_memory(problem.device)
         if free is not None and need > 0.8 * free:
@@ -186,7 +194,8 @@ class Transport:
         self.matrix = wp.zeros((n, n) if self.mode == MATRIX else (1, 1), dtype=wp.float32, device=d)
         self.visibility = wp.zeros((n, n) if self.mode == VISIBILITY else (1, 1), dtype=wp.uint8,
                                    device=d)
-        self.traced = wp.zeros(1, dtype=wp.int64, device=d)
+        self.traced = wp.zeros(n, dtype=wp.int32, device=d)  # rays per row (thread) of a launch
+        self._rays = 0
         self.rays = int(settings.visibility_rays)
         self.seed = int(settings.seed) + 7919
 
@@ -199,6 +208,7 @@ class Transport:
                           [n, self.problem.surfels, self.rays, self.seed, self.mode, self.matrix,
                            self.visibility, self.traced],
                           self.problem.device, chunks=max(1, min(64, n // 128)), on_chunk=progress)
+        self._count()
 
     def sweep(self, direct: wp.array, indirect: wp.array, out: wp.array, progress=None) -> None:
         """out ← M (ρ ⊙ (direct + indirect)) (vec3[n] device arrays)."""
@@ -209,10 +219,23 @@ class Transport:
                           self.problem.device,
                           chunks=1 if self.mode == MATRIX else max(1, min(16, n // 256)),
                           on_chunk=progress)
+        if self.mode == TRACED:
+            self._count()
+
+    def _count(self) -> None:
+        """Add the rays the last launch traced (per-thread counts, summed in int64)."""
+        self._rays += int(self.traced.numpy().astype(np.int64).sum())
+        self.traced.zero_()
 
     @property
     def rays_traced(self) -> int:
-        return int(self.traced.numpy()[0])
+        return self._rays
+
+
+def _mode(n: int, max_pairs: int) -> int:
+    """The transport mode the budget (``max_pairs`` × 4 bytes) allows for n elements."""
+    budget = 4 * int(max_pairs)
+    return MATRIX if 4 * n * n <= budget else VISIBILITY if n * n <= budget else TRACED
 
 
 def predicted_seconds(problem) -> float:
@@ -223,22 +246,26 @@ def predicted_seconds(problem) -> float:
     rate = PAIRS_PER_SECOND_PER_THREAD * dev.threads * (CUDA_SPEEDUP if dev.is_cuda else 1.0)
     rate *= 4.0 / max(1, problem.settings.visibility_rays)
     seconds = 0.5 * n * n / rate
-    if 4 * n * n > 4 * problem.settings.max_pairs and n * n > 4 * problem.settings.max_pairs:
-        seconds *= 2 * problem.settings.bounces  # traced: every sweep traces every row
+    if _mode(n, problem.settings.max_pairs) == TRACED:
+        seconds *= 2 * problem.settings.bounces  # every sweep traces every row again
     return seconds
 
 
 def check(problem) -> list[str]:
     """Warnings before the solve: a bake predicted to run long says so, with the pair count and
-    the method to use instead."""
+    the method to use instead (and the budget that would keep the visibility)."""
     seconds = predicted_seconds(problem)
     if seconds < SLOW_SECONDS:
         return []
     n = problem.elements.count
-    return [f"the reference solver traces {n * n / 2:.3g} element pairs for {n} elements: "
-            f"predicted {_duration(seconds)} on {problem.device.name} ({problem.device.threads} "
-            f"threads); use --method bunnell for scenes this large (the reference is the "
-            f"yardstick for small scenes)"]
+    message = (f"the reference solver traces {n * n / 2:.3g} element pairs for {n} elements: "
+               f"predicted {_duration(seconds)} on {problem.device.name} ({problem.device.threads} "
+               f"threads); use --method bunnell for scenes this large (the reference is the "
+               f"yardstick for small scenes)")
+    if _mode(n, problem.settings.max_pairs) == TRACED:
+        message += (f"; its visibility does not fit --max-pairs {problem.settings.max_pairs} and is "
+                    f"traced again every sweep: --max-pairs {-(-n * n // 4)} keeps it ({n * n / 2**30:.2f} GiB)")
+    return [message]
 
 
 def _duration(seconds: float) -> str:
@@ -251,32 +278,20 @@ def _duration(seconds: float) -> str:
 
 def solve(problem) -> Solution:
     """Indirect lighting per element (float32[n,3], irradiance/π) from the problem's direct
-    lighting: Jacobi sweeps until the largest change is below ``tolerance`` × the largest
-    lighting value, or after ``bounces`` sweeps."""
+    lighting: Jacobi sweeps, from the previous frame's solution in an animation, until the
+    largest change is below ``tolerance`` × the largest lighting value, or after ``bounces``
+    sweeps."""
     settings, stages = problem.settings, problem.stages
-    direct = problem.direct
-    d = problem.device.name
+    problem.direct  # noqa: B018  (traced before the transport, as the stages report it)
     transport = Transport(problem)
     stages.run("form factors", transport.build, stages.reporter("form factors"))
     n = problem.elements.count
-    dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
-    current = wp.zeros(n, dtype=wp.vec3, device=d)
-    nxt = wp.zeros(n, dtype=wp.vec3, device=d)
-    before = np.zeros((n, 3), np.float32)
-    scale_direct = float(np.abs(direct).max(initial=0.0))
-    sweeps = 0
-    for sweeps in range(1, settings.bounces + 1):
-        transport.sweep(dev_direct, current, nxt,
-                        lambda f, k=sweeps: stages.report("bounces", (k - 1 + f) / settings.bounces))
-        current, nxt = nxt, current
-        now = current.numpy()
-        change = float(np.abs(now - before).max(initial=0.0))
-        scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
-        before = now
-        stages.report("bounces", sweeps / settings.bounces)
-        if change <= settings.tolerance * scale:
-            break
-    return Solution(before, {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps,
+
+    def sweep(direct, current, out, k):
+        transport.sweep(direct, current, out, lambda f: stages.report("bounces", (k - 1 + f) / settings.bounces))
+
+    values, sweeps, _, _ = iterate(problem, sweep, settings.bounces)
+    return Solution(values, {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps,
                              "transport": MODES[transport.mode]})
 
 

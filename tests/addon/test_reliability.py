@@ -431,7 +431,7 @@ def bake_raises(monkeypatch):
         def bake(*args, **kwargs):
             raise exc
 
-        monkeypatch.setattr(job_module.core, "bake", bake)
+        monkeypatch.setattr(job_module.Sequence, "bake", bake)
 
     return arm
 

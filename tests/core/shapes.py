@@ -97,3 +97,25 @@ def disk(radius: float, rings: int, segments: int, z: float = 0.0, flip: bool = 
         tris = tris[:, ::-1].copy()
         nrm = -nrm
     return pos.astype(np.float32), nrm, tris
+
+
+# Rotations taking +Z to each face normal of an axis-aligned box (proper rotations: windings stay
+# counter-clockwise about the rotated normal).
+_FACES = [np.eye(3), np.diag([1.0, -1.0, -1.0]), np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], float),
+          np.array([[0, 0, -1], [0, 1, 0], [1, 0, 0]], float), np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], float),
+          np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)]
+
+
+def box(size: float, n: int, centre=(0.0, 0.0, 0.0), inward: bool = False):
+    """The six faces of a cube of side ``size`` at ``centre``, n×n quads each, flat normals facing
+    out (in if ``inward``): a list of (positions, normals, triangles) for ``scene``."""
+    p, nrm, t = grid(size, n)
+    out = []
+    for rot in _FACES:
+        q = p @ rot.T + rot @ np.array([0.0, 0.0, size / 2]) + np.asarray(centre)
+        normal = nrm @ rot.T
+        tris = t
+        if inward:
+            normal, tris = -normal, t[:, ::-1]
+        out.append((q.astype(np.float32), normal.astype(np.float32), np.ascontiguousarray(tris, np.int32)))
+    return out

@@ -28,7 +28,7 @@ def _targets(sc, parts, names=None, mesh_names=None, corner_uv=None):
 def _corner_values(result, target):
     """float32[C,3]: the bake's per-vertex output at each face corner of ``target`` (_targets)."""
     nt = target.corner_triangles.shape[0]
-    return result.output[result.corner_vertex[target.triangle_offset:target.triangle_offset + nt].ravel()]
+    return result.output[result.shading.corner[target.triangle_offset:target.triangle_offset + nt].ravel()]
 
 
 def _room():

@@ -75,3 +75,16 @@ def test_combined_is_emission_plus_albedo_times_lighting():
     lighting = bake(sc, Settings(method="direct")).output
     combined = bake(sc, Settings(method="direct", content="combined")).output
     np.testing.assert_allclose(combined, np.array([0.3, 0, 0]) + np.array([0.5, 0.25, 0.1]) * lighting, rtol=1e-5)
+
+
+def test_a_first_bake_says_it_compiles_kernels_and_later_ones_do_not(monkeypatch):
+    from radiosity_baker.core import device as device_mod
+
+    def stages_of():
+        seen = []
+        bake(lit_plane(), Settings(method="direct", device="cpu"), progress=lambda s, f: seen.append(s))
+        return seen
+
+    assert not any(s.startswith("compiling kernels") for s in stages_of())  # cached by now
+    monkeypatch.setattr(device_mod, "_cached", lambda module, device: False)  # as on a fresh install
+    assert sum(s.startswith("compiling kernels") for s in stages_of()) == 1

@@ -5,6 +5,7 @@ import pytest
 import shapes
 from radiosity_baker.core import Settings, bake
 from radiosity_baker.core.problem import Problem
+from radiosity_baker.core.solvers import reference
 from radiosity_baker.core.solvers.reference import Transport
 from radiosity_baker.core.scene import LAMP_POINT
 
@@ -133,3 +134,20 @@ def test_bruteforce_is_another_name_for_the_reference_solver():
     scene = open_box_scene((0.5,) * 3)
     np.testing.assert_array_equal(bake(scene, Settings(method="bruteforce")).lighting,
                                   bake(scene, Settings(method="reference")).lighting)
+
+
+def test_a_large_scene_is_announced_with_its_pairs_time_and_a_faster_method():
+    """20 k elements would keep the reference busy for a long time: say so before starting."""
+    p, n, t = shapes.grid(10.0, 140)
+    problem = Problem(shapes.scene([(p, n, t, (0.5,) * 3, (0,) * 3)]), Settings(method="reference", device="cpu"))
+    (message,) = reference.check(problem)
+    assert f"{problem.elements.count} elements" in message and "predicted" in message
+    assert "--method bunnell" in message
+
+
+def test_the_announcement_comes_before_the_solve(monkeypatch):
+    monkeypatch.setattr(reference, "SLOW_SECONDS", 0.0)
+    events = []
+    bake(open_box_scene((0.5,) * 3), Settings(method="reference", device="cpu"),
+         progress=lambda stage, f: events.append(stage), notify=lambda m: events.append("warning"))
+    assert "warning" in events and events.index("warning") < events.index("form factors")

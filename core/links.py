@@ -1,0 +1,740 @@
+"""Links between cluster-tree nodes, created data-parallel level by level (ALGORITHMS.md §4, §7, §9).
+
+A link joins two nodes of the element tree (``hierarchy.Tree``) that exchange light as wholes.
+Links are made top-down from a queue of candidate node pairs, starting with (root, root). Per
+round, one kernel evaluates the *oracle* of every candidate and decides:
+
+- drop: the pair cannot exchange light (one side faces away from the other entirely, bounded by
+  the nodes' normal cones and bounding spheres), or a leaf paired with itself;
+- link: the pair's transfer estimate (``pair_need``: each side's size as the other sees it, a
+  form factor, and its normal spread as a receiver), times the pair's brightness weight when a
+  radiance estimate is given, is below the threshold — unless the link's rays find it partly
+  visible while its estimate exceeds PARTIAL × the threshold: it is split instead, so shadow
+  boundaries get finer links; two leaves always link (their near field is exact);
+- split: the side with the larger estimate (a leaf never): its children are paired with the
+  other side; a node paired with itself becomes all pairs of its children (each unordered pair
+  once). Pairs hold leaves or nodes with several children (``canonical``).
+
+An exclusive scan (``wp.utils.array_scan``) of the decisions' output counts gives the write
+offsets; a second kernel scatters the links and the next queue. This repeats until the queue is
+empty (about two rounds per tree level). Pairs are unordered — the oracle is symmetric — so each
+link carries both directions.
+
+A link's transfer both ways is estimated where it is made (``sampled_transfer``): ``rays`` sample
+pairs, one leaf of each node (a leaf node is its own), stratified; per sample the element form
+factor from the receiving leaf's point to the sending leaf (``reference.point_ff``: disk far,
+exact triangles near) per unit area, times one of the reference's visibility rays between the two
+leaves (``element_ray``; with visibility). Given a radiance estimate, leaves are drawn in proportion to area × (radiance
++ a floor), and each direction's mean is weighted by the radiance at its sending end over the
+sampling density (self-normalised), so what a link carries is Σ A·B·F·V over the sender — a hot
+spot hidden in a cluster (the ceiling 1 mm above the Cornell light) does not leak through the
+cluster's visible parts. Two leaves get the reference solver's element form factors and
+``pair_hits``: with leaves only, links are the reference's transport. Solvers without explicit
+visibility (antiradiance, implicit visibility) ask for ``visibility=False``.
+
+Finally both directions are sorted by receiver (``wp.utils.radix_sort_pairs``) into CSR
+(``LinkSet``): a gather is one thread per receiver node over a contiguous range, no atomics.
+
+Memory: the links and candidates in flight are held to ``budget`` bytes (BYTES_PER_LINK per link
+at the peak, while sorting; BYTES_PER_CANDIDATE per queued pair). A scene that would exceed it is
+rebuilt with the threshold raised (×RAISE per try, found by trial builds without rays) and a
+warning says how many links were made and at what threshold; only when even the coarsest links
+(threshold ≥ COARSEST: every pair links at first sight) do not fit does the bake stop with a
+message.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from . import device as device_mod
+from .errors import BakeError
+from .gather import cluster_ff
+from .hierarchy import Nodes
+from .problem import Surfels
+from .rays import lift, visible
+from .solvers.reference import element_ff, fan_sample, pair_hits, point_ff
+
+DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
+# Peak bytes per link (both directions): the pair and its five values while it is made, then two
+# sort keys and values at twice their count, and the CSR entries (sender, transfer, normaliser,
+# visibility) of both directions.
+BYTES_PER_LINK = 88
+# Bytes per candidate pair in flight: the pair, its decision, counts and values, the next queue.
+BYTES_PER_CANDIDATE = 48
+# Brightness weights of the oracle (a node's brightest leaf over the scene's mean radiance) are
+# clamped to [WEIGHT_LOW, WEIGHT_HIGH]; sample leaves are drawn in proportion to area ×
+# (radiance + SAMPLE_FLOOR × the mean), so dim leaves keep some samples.
+WEIGHT_LOW, WEIGHT_HIGH = 0.25, 4.0
+SAMPLE_FLOOR = 0.25
+# The normal-spread term of a receiver's need is weighted by this: a cluster folded round a corner
+# receives one value for leaves that see a sender very differently, and its per-leaf correction
+# rests on a few samples, so such clusters are split sooner than flat ones.
+CONE_WEIGHT = 4.0
+# A partly visible link is split while its estimate exceeds this fraction of the threshold.
+PARTIAL = 0.25
+# The largest ratio of a link's sampled unoccluded transfer over its centroid form factor that a
+# single receiving point keeps (see _normaliser).
+JENSEN = 1.2
+# Each try over the budget multiplies the threshold by this; the trial builds that find the
+# threshold (no rays) must fit the budget over this margin.
+RAISE = 2.0
+TRIAL_MARGIN = 1.5
+# No estimate of pair_need exceeds this: at this threshold every pair of distinct nodes links.
+COARSEST = 2.0
+PI = math.pi
+
+
+@dataclass(frozen=True)
+class Oracle:
+    """How links are chosen, and the key they are cached under (``Problem.links``).
+
+    threshold: the largest estimate (``pair_need``, a form factor) a link may have; smaller gives
+    more, finer links. rays: sample pairs a link's transfer is estimated from (0: the form factor
+    between the nodes' centres, ``centroid_ff``). visibility: trace a ray per sample (False: links
+    carry unoccluded transfer, for implicit visibility or antiradiance). seed: of the sample
+    jitter. budget: bytes the links may take. brightness: a label of the radiance estimate passed
+    to ``build`` (None: none: geometric refinement, samples by area), so links made with one are
+    cached apart.
+    """
+
+    threshold: float
+    rays: int = 0
+    visibility: bool = True
+    seed: int = 1
+    budget: int = 4 << 30
+    brightness: str | None = None
+
+
+@wp.struct
+class LinkSet:
+    """The directed links as kernels read them, sorted by receiver node.
+
+    offsets: int32[m+1], receiver r's links are offsets[r] … offsets[r+1]−1; sender: int32[E] the
+    sending node; transfer: float32[E] the transfer (lighting at the receiver per unit radiance of
+    the sender's front) averaged over the receiver, with visibility when traced; form_factor:
+    float32[E] the normaliser: the sender's ``centroid_ff`` averaged over the same receiving
+    points (exact for two leaves), so transfer × centroid_ff(at a point of the receiver) /
+    form_factor is the transfer at that point; visible: uint8[E] the visible fraction of the
+    transfer × 255 (the sampled transfer over its unoccluded value; 255 without visibility):
+    0 < visible < 255 marks a link across a shadow boundary.
+    """
+
+    offsets: wp.array(dtype=wp.int32)
+    sender: wp.array(dtype=wp.int32)
+    transfer: wp.array(dtype=wp.float32)
+    form_factor: wp.array(dtype=wp.float32)
+    visible: wp.array(dtype=wp.uint8)
+
+
+@dataclass
+class Links:
+    """Links over ``problem.tree``: ``set`` (``LinkSet`` on the device), ``pairs`` unordered links
+    (``count`` = 2 × pairs directed ones), the ``threshold`` used (raised from the oracle's when
+    the budget asked for it), ``rounds`` of the build, ``rays_traced``, ``seconds`` the build took
+    (creation with its transfers and visibility, and the sort into CSR)."""
+
+    set: LinkSet
+    pairs: int
+    threshold: float
+    rounds: int
+    rays_traced: int
+    seconds: float
+
+    @property
+    def count(self) -> int:
+        return 2 * self.pairs
+
+
+@wp.struct
+class Sampling:
+    """How the sample leaves of a link are drawn: first_leaf int32[m] of each node; cum
+    float64[n+1] the running sum over the leaves (leaf order) of area × (glow + floor); glow
+    float32[n] each leaf's radiance estimate (1 without one); floor: the added floor (0 without an
+    estimate)."""
+
+    first_leaf: wp.array(dtype=wp.int32)
+    cum: wp.array(dtype=wp.float64)
+    glow: wp.array(dtype=wp.float32)
+    floor: float
+
+
+@wp.func
+def cos_bound(n: wp.vec3, cone: wp.vec2, u: wp.vec3, beta: wp.vec2) -> float:
+    """An upper bound of n'·u' over normals n' within a cone of unit n and directions u' within
+    angle β of unit u: the cosine of the angle between n and u less the cone's and β's (1 when
+    that is negative); cone and beta as (cos, sin) of their half-angles, so no trigonometry is
+    needed."""
+    c = cone[0] * beta[0] - cone[1] * beta[1]  # cos and sin of the two half-angles' sum γ
+    g = cone[1] * beta[0] + cone[0] * beta[1]
+    ct = wp.clamp(wp.dot(n, u), -1.0, 1.0)
+    if g < 0.0 or ct >= c:  # γ > π, or the angle to u is within γ
+        return 1.0
+    return ct * c + wp.sqrt(1.0 - ct * ct) * g
+
+
+@wp.func
+def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec2, pb: wp.vec3,
+              nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec2) -> wp.vec3:
+    """How much nodes a and b — centres p, unit normals n, bounding radii r (m), areas (m²),
+    normal cones ((cos, sin) of the half-angle) — must be refined to exchange light as wholes:
+    (need of a, need of b, 1 if they can exchange light at all else 0).
+
+    Dropped (0) when the cosines bounded over the cones and the directions between the bounding
+    spheres show one side facing away; 1 each when the spheres overlap. Else the need of a is the
+    larger of its size as b sees it, A_a·cos·cos / (π d² + A_a) with the bounded cosines and the
+    centres' distance d, and its normal spread as a receiver: b's form factor from a without a's
+    cosine times 2 sin(cone_a / 2) — how far a's leaves' normals may differ from its own — times
+    CONE_WEIGHT. A point
+    (r = 0, area 0, cone (1, 0)) as a needs nothing itself."""
+    v = pb - pa
+    d = wp.length(v)
+    gap = d - ra - rb
+    if gap <= 0.0:
+        return wp.vec3(1.0, 1.0, 1.0)
+    u = v / d
+    sb = (ra + rb) / d
+    beta = wp.vec2(wp.sqrt(1.0 - sb * sb), sb)
+    ca = cos_bound(na, cone_a, u, beta)
+    cb = cos_bound(nb, cone_b, -u, beta)
+    if ca <= 0.0 or cb <= 0.0:
+        return wp.vec3(0.0, 0.0, 0.0)
+    g2 = PI * d * d
+    g_ab = area_b * cb / (g2 + area_b)  # b seen from a, without a's cosine
+    g_ba = area_a * ca / (g2 + area_a)
+    need_a = wp.max(g_ba * cb, g_ab * CONE_WEIGHT * wp.sqrt(2.0 * wp.max(1.0 - cone_a[0], 0.0)))
+    need_b = wp.max(g_ab * ca, g_ba * CONE_WEIGHT * wp.sqrt(2.0 * wp.max(1.0 - cone_b[0], 0.0)))
+    return wp.vec3(need_a, need_b, 1.0)
+
+
+@wp.func
+def children(t: Nodes, node: int) -> wp.vec2i:
+    """The child range [first, end) a split of inner ``node`` gives: past cells with one child."""
+    c0 = t.descend[node]
+    return wp.vec2i(c0, t.child_end[t.parent[c0]])
+
+
+@wp.func
+def canonical(t: Nodes, node: int) -> int:
+    """The node a pair holds for ``node``: a leaf, or the first node at or below it with more than
+    one child (a chain of one-child cells stands for the same disks; a chain over a single leaf is
+    that leaf, whose near field is exact)."""
+    x = t.descend[node]
+    if x < 0:
+        return node
+    p = t.parent[x]
+    if t.child_end[p] - x == 1:
+        return x
+    return p
+
+
+@wp.func
+def centroid_ff(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int) -> float:
+    """Unoccluded form factor from point p (unit normal n) to the front of node b: a leaf's element
+    form factor (``reference.point_ff``), else the cluster form factor of b's disks gathered at
+    its centre (``gather.cluster_ff``)."""
+    if t.descend[b] < 0:
+        return point_ff(s, p, n, t.element[b])
+    return cluster_ff(p, n, t.position[b], t.normal[b], t.area[b], t.spread[b], t.leaves[b])
+
+
+@wp.func
+def sample_leaf(t: Nodes, sm: Sampling, node: int, u: float) -> int:
+    """A leaf (node index) of node's subtree (node itself for a leaf) chosen with u ∈ [0, 1) in
+    proportion to the weights whose running sum is ``sm.cum`` (the leaves of a subtree are
+    consecutive in leaf order)."""
+    if t.descend[node] < 0:
+        return node
+    lo = sm.first_leaf[node]
+    hi = lo + int(t.leaves[node] + 0.5)
+    base = sm.cum[lo]
+    target = base + wp.float64(u) * (sm.cum[hi] - base)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if sm.cum[mid] <= target:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@wp.func
+def leaf_point(t: Nodes, s: Surfels, leaf: int) -> wp.vec3:
+    """Where rays to and from a leaf start: its element's point, lifted off its surface."""
+    e = t.element[leaf]
+    return lift(s.pos[e], s.nrm[e], wp.sqrt(s.area[e]))
+
+
+@wp.func
+def element_ray(s: Surfels, i: int, j: int, u0: float, u1: float, u2: float) -> float:
+    """1 if one of the reference's visibility rays between elements i and j is free (``pair_hits``:
+    from the lower-numbered one's point to a point of the other's own surface, both lifted off
+    their surfaces), else 0."""
+    lo = wp.min(i, j)
+    hi = wp.max(i, j)
+    origin = lift(s.pos[lo], s.nrm[lo], wp.sqrt(s.area[lo]))
+    return visible(s.mesh, origin, lift(fan_sample(s, hi, u0, u1, u2), s.nrm[hi], wp.sqrt(s.area[hi])))
+
+
+@wp.func
+def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: int, visibility: int,
+                     seed: int):
+    """Link (a, b) from ``rays`` sample pairs (see the module docstring): ((transfer to a, to b,
+    normaliser to a, to b), (visible fraction of the transfer to a, to b, plain visible fraction
+    of the rays)). The normalisers (``centroid_ff`` of the sender from the receiving samples) are
+    averaged over the receiving end by area, as the transfer is."""
+    state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
+    shift = int(wp.randf(state) * float(rays))
+    w_ab = float(0.0)  # a receives from b: weights, weighted sum, plain sum
+    h_ab = float(0.0)
+    x_ab = float(0.0)
+    w_ba = float(0.0)
+    h_ba = float(0.0)
+    x_ba = float(0.0)
+    u_ab = float(0.0)  # weighted sums of the unoccluded samples
+    u_ba = float(0.0)
+    r_a = float(0.0)  # receiving-end weights and centroid form factors
+    c_ab = float(0.0)
+    r_b = float(0.0)
+    c_ba = float(0.0)
+    seen = float(0.0)
+    for k in range(rays):
+        la = sample_leaf(t, sm, a, (float(k) + wp.randf(state)) / float(rays))
+        lb = sample_leaf(t, sm, b, (float((k + shift) % rays) + wp.randf(state)) / float(rays))
+        # each end's density relative to area: ∝ glow + floor on a cluster, one point on a leaf
+        da = float(1.0)
+        db = float(1.0)
+        if la != a:
+            da = sm.glow[la] + sm.floor
+        if lb != b:
+            db = sm.glow[lb] + sm.floor
+        ea = t.element[la]
+        eb = t.element[lb]
+        hit = float(1.0)
+        if visibility != 0:
+            hit = element_ray(s, ea, eb, wp.randf(state), wp.randf(state), wp.randf(state))
+        seen += hit
+        f = point_ff(s, s.pos[ea], s.nrm[ea], eb) / s.area[eb]
+        w = sm.glow[lb] / (da * db)
+        w_ab += w
+        h_ab += w * f * hit
+        u_ab += w * f
+        x_ab += f * hit
+        f = point_ff(s, s.pos[eb], s.nrm[eb], ea) / s.area[ea]
+        w = sm.glow[la] / (da * db)
+        w_ba += w
+        h_ba += w * f * hit
+        u_ba += w * f
+        x_ba += f * hit
+        r_a += 1.0 / da
+        c_ab += centroid_ff(t, s, s.pos[ea], s.nrm[ea], b) / da
+        r_b += 1.0 / db
+        c_ba += centroid_ff(t, s, s.pos[eb], s.nrm[eb], a) / db
+    t_ab = x_ab / float(rays)
+    if w_ab > 0.0:
+        t_ab = h_ab / w_ab
+        u_ab = u_ab / w_ab
+    t_ba = x_ba / float(rays)
+    if w_ba > 0.0:
+        t_ba = h_ba / w_ba
+        u_ba = u_ba / w_ba
+    plain = seen / float(rays)
+    return (wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
+                    _normaliser(u_ba * t.area[a], c_ba / r_b)),
+            wp.vec3(_fraction(t_ab, u_ab, plain), _fraction(t_ba, u_ba, plain), plain))
+
+
+@wp.func
+def _fraction(occluded: float, unoccluded: float, plain: float) -> float:
+    """The visible fraction of a transfer: its sampled value over the unoccluded one (the rays'
+    plain fraction where that is 0)."""
+    if unoccluded > 0.0:
+        return wp.clamp(occluded / unoccluded, 0.0, 1.0)
+    return plain
+
+
+@wp.func
+def _normaliser(unoccluded: float, centroid: float) -> float:
+    """What a link's transfer is divided by before it is scaled by ``centroid_ff`` at one point of
+    the receiver: the centroid form factor averaged over the receiving samples, kept within
+    [unoccluded / JENSEN, unoccluded] of the sampled unoccluded transfer (the samples' mean of
+    1/d² exceeds its value at the centre, by a few per cent; an average near 0 — a receiver cluster
+    folded round a near sender — must not blow the ratio up)."""
+    return wp.clamp(centroid, unoccluded / JENSEN, unoccluded)
+
+
+@wp.kernel
+def _cone_kernel(offset: int, node0: int, t: Nodes, angle: wp.array(dtype=wp.float32),
+                 cone: wp.array(dtype=wp.vec2)):
+    """Half-angle of the cone around each node's normal holding its subtree's normals, from its
+    children's (already set; leaves 0), and its (cos, sin)."""
+    node = node0 + wp.tid() + offset
+    n = t.normal[node]
+    a = float(0.0)
+    for c in range(t.first_child[node], t.child_end[node]):
+        a = wp.max(a, wp.acos(wp.clamp(wp.dot(n, t.normal[c]), -1.0, 1.0)) + angle[c])
+    a = wp.min(a, PI)
+    angle[node] = a
+    cone[node] = wp.vec2(wp.cos(a), wp.sin(a))
+
+
+@wp.kernel
+def _first_leaf_kernel(offset: int, t: Nodes, first_leaf: wp.array(dtype=wp.int32)):
+    node = wp.tid() + offset
+    k = node
+    while t.descend[k] >= 0:
+        k = t.descend[k]
+    first_leaf[node] = k
+
+
+@wp.kernel
+def _max_kernel(offset: int, node0: int, t: Nodes, values: wp.array(dtype=wp.float32)):
+    node = node0 + wp.tid() + offset
+    v = float(0.0)
+    for c in range(t.first_child[node], t.child_end[node]):
+        v = wp.max(v, values[c])
+    values[node] = v
+
+
+@wp.kernel
+def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.int32)):
+    out[0] = canonical(t, node)
+
+
+@wp.kernel
+def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
+                   s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
+                   weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
+                   seed: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
+                   link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
+                   visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int64)):
+    """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
+    a link, a link's (transfer to a, to b, normaliser to a, to b) and the visible fractions of
+    its transfers; rays traced are counted in ``traced``."""
+    i = wp.tid() + offset
+    a = qa[i]
+    b = qb[i]
+    dec = DROP
+    count = int(0)
+    out = wp.vec4(0.0)
+    seen = wp.vec3(1.0)
+    leaf_a = t.descend[a] < 0
+    leaf_b = t.descend[b] < 0
+    if t.area[a] > 0.0 and t.area[b] > 0.0:
+        if a == b:
+            if not leaf_a:
+                r = children(t, a)
+                k = r[1] - r[0]
+                dec = SPLIT_SELF
+                count = k * (k + 1) // 2
+        elif leaf_a and leaf_b:
+            ea = t.element[a]
+            eb = t.element[b]
+            f_ab = element_ff(s, ea, eb)
+            f_ba = element_ff(s, eb, ea)
+            if f_ab > 0.0 or f_ba > 0.0:
+                dec = LINK
+                v = float(1.0)
+                if visibility != 0 and rays > 0:
+                    v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
+                    wp.atomic_add(traced, 0, wp.int64(rays))
+                out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
+                seen = wp.vec3(v, v, v)
+        else:
+            need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
+                             t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b])
+            if need[2] > 0.0:
+                w = float(1.0)
+                if weighted != 0:
+                    w = wp.max(weight[a], weight[b])
+                need_a = need[0] * w
+                need_b = need[1] * w
+                largest = wp.max(need_a, need_b)
+                split = largest > threshold
+                if not split:
+                    if rays > 0:
+                        out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed)
+                        if visibility != 0:
+                            wp.atomic_add(traced, 0, wp.int64(rays))
+                        split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
+                    else:
+                        f_ab = centroid_ff(t, s, t.position[a], t.normal[a], b)
+                        f_ba = centroid_ff(t, s, t.position[b], t.normal[b], a)
+                        out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
+                    if not split and (out[0] > 0.0 or out[1] > 0.0):
+                        dec = LINK
+                if split:
+                    if leaf_a or (not leaf_b and need_b >= need_a):
+                        dec = SPLIT_B
+                        r = children(t, b)
+                        count = r[1] - r[0]
+                    else:
+                        dec = SPLIT_A
+                        r = children(t, a)
+                        count = r[1] - r[0]
+    decision[i] = dec
+    out_count[i] = count
+    link_count[i] = int(dec == LINK)
+    values[i] = out
+    visible_out[i] = wp.vec2(seen[0], seen[1])
+
+
+@wp.kernel
+def _scatter_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
+                    decision: wp.array(dtype=wp.int32), out_offset: wp.array(dtype=wp.int32),
+                    link_offset: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
+                    visible_in: wp.array(dtype=wp.vec2), next_a: wp.array(dtype=wp.int32),
+                    next_b: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
+                    lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
+                    lvisible: wp.array(dtype=wp.vec2)):
+    """Write candidate i's link, or its pairs of the next queue, at its scanned offsets."""
+    i = wp.tid() + offset
+    a = qa[i]
+    b = qb[i]
+    dec = decision[i]
+    o = out_offset[i]
+    if dec == LINK:
+        j = link_offset[i]
+        la[j] = a
+        lb[j] = b
+        lvalues[j] = values[i]
+        lvisible[j] = visible_in[i]
+    elif dec == SPLIT_A:
+        r = children(t, a)
+        for c in range(r[0], r[1]):
+            next_a[o] = canonical(t, c)
+            next_b[o] = b
+            o += 1
+    elif dec == SPLIT_B:
+        r = children(t, b)
+        for c in range(r[0], r[1]):
+            next_a[o] = a
+            next_b[o] = canonical(t, c)
+            o += 1
+    elif dec == SPLIT_SELF:
+        r = children(t, a)
+        for c in range(r[0], r[1]):
+            for c2 in range(c, r[1]):
+                next_a[o] = canonical(t, c)
+                next_b[o] = canonical(t, c2)
+                o += 1
+
+
+@wp.kernel
+def _directed_kernel(offset: int, la: wp.array(dtype=wp.int32), lb: wp.array(dtype=wp.int32),
+                     keys: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.int32)):
+    """Both directions of link i: receiver a (value 2i), receiver b (value 2i + 1)."""
+    i = wp.tid() + offset
+    keys[2 * i] = la[i]
+    values[2 * i] = 2 * i
+    keys[2 * i + 1] = lb[i]
+    values[2 * i + 1] = 2 * i + 1
+
+
+@wp.kernel
+def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
+                values: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32), lb: wp.array(dtype=wp.int32),
+                lvalues: wp.array(dtype=wp.vec4), lvisible: wp.array(dtype=wp.vec2), out: LinkSet):
+    """Sorted directed link j: its sender, transfer and form factor; row starts where the
+    receiver changes."""
+    j = wp.tid() + offset
+    v = values[j]
+    i = v // 2
+    x = lvalues[i]
+    if v % 2 == 0:
+        out.sender[j] = lb[i]
+        out.transfer[j] = x[0]
+        out.form_factor[j] = x[2]
+    else:
+        out.sender[j] = la[i]
+        out.transfer[j] = x[1]
+        out.form_factor[j] = x[3]
+    out.visible[j] = wp.uint8(wp.int32(lvisible[i][v % 2] * 255.0 + 0.5))
+    r = keys[j]
+    prev = int(-1)
+    if j > 0:
+        prev = keys[j - 1]
+    for q in range(prev + 1, r + 1):
+        out.offsets[q] = j
+    if j == count - 1:
+        for q in range(r + 1, m + 1):
+            out.offsets[q] = count
+
+
+def cones(tree) -> wp.array:
+    """vec2[m]: (cos, sin) of each node's normal-cone half-angle over its subtree (leaves (1, 0)),
+    one launch per level."""
+    dev = tree.device
+    angle = wp.zeros(tree.count, dtype=wp.float32, device=dev.name)
+    cone = wp.full(tree.count, wp.vec2(1.0, 0.0), dtype=wp.vec2, device=dev.name)
+    offs = tree.level_offsets
+    for lv in range(1, len(offs) - 1):
+        device_mod.launch(_cone_kernel, int(offs[lv + 1] - offs[lv]), [int(offs[lv]), tree.nodes, angle, cone], dev)
+    return cone
+
+
+def leaf_luminance(tree, radiance: np.ndarray) -> np.ndarray:
+    """float64[n]: the luminance of ``radiance`` (float32[n,3] per element) in leaf order."""
+    lum = np.asarray(radiance, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    return lum[tree.order.numpy()]
+
+
+def _leaf_area(tree) -> np.ndarray:
+    return tree.nodes.area.numpy()[:int(tree.level_offsets[1])].astype(np.float64)
+
+
+def weights(tree, lum: np.ndarray) -> wp.array:
+    """float32[m] per-node weights of the oracle: the largest leaf luminance ``lum`` (float64[n],
+    leaf order) in each node's subtree over the scene's area-weighted mean, clamped to
+    [WEIGHT_LOW, WEIGHT_HIGH]: links touching bright nodes are refined further, links between dim
+    ones stay coarser."""
+    dev = tree.device
+    area = _leaf_area(tree)
+    mean = float((lum * area).sum() / max(area.sum(), 1e-30))
+    values = np.zeros(tree.count, np.float32)
+    values[:len(lum)] = lum / mean if mean > 0 else 1.0
+    out = wp.array(values, dtype=wp.float32, device=dev.name)
+    offs = tree.level_offsets
+    for lv in range(1, len(offs) - 1):
+        device_mod.launch(_max_kernel, int(offs[lv + 1] - offs[lv]), [int(offs[lv]), tree.nodes, out], dev)
+    return wp.array(np.clip(out.numpy(), WEIGHT_LOW, WEIGHT_HIGH), dtype=wp.float32, device=dev.name)
+
+
+def sampling(tree, lum: np.ndarray | None = None, floor: float = 0.0) -> Sampling:
+    """How sample leaves are drawn (``Sampling``): in proportion to area × (lum + floor × the
+    area-weighted mean of lum), lum float64[n] a radiance estimate per leaf (leaf order); by area
+    alone without one."""
+    dev = tree.device
+    d = dev.name
+    area = _leaf_area(tree)
+    sm = Sampling()
+    sm.first_leaf = wp.empty(tree.count, dtype=wp.int32, device=d)
+    device_mod.launch(_first_leaf_kernel, tree.count, [tree.nodes, sm.first_leaf], dev)
+    if lum is None:
+        glow, sm.floor = np.ones_like(area), 0.0
+    else:
+        glow = np.asarray(lum, np.float64)
+        sm.floor = floor * float((glow * area).sum() / max(area.sum(), 1e-30))
+    sm.glow = wp.array(glow.astype(np.float32), dtype=wp.float32, device=d)
+    sm.cum = wp.array(np.concatenate([[0.0], np.cumsum(area * (glow + sm.floor))]), dtype=wp.float64, device=d)
+    return sm
+
+
+def _int(a: wp.array, i: int) -> int:
+    return int(a[i:i + 1].numpy()[0])
+
+
+def _canonical_root(tree) -> int:
+    out = wp.empty(1, dtype=wp.int32, device=tree.device.name)
+    wp.launch(_canonical_kernel, dim=1, inputs=[0, tree.nodes, tree.root, out], device=tree.device.name)
+    return _int(out, 0)
+
+
+def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, traced: wp.array):
+    """One top-down build at ``threshold``: the unordered links (int32 a, b, vec4 values, vec2
+    visible fractions: device arrays) and the rounds taken, or None when the budget was exceeded
+    on the way."""
+    tree, dev, stages = problem.tree, problem.device, problem.stages
+    d = dev.name
+    t = tree.nodes
+    cone = cones(tree)
+    weighted = weight is not None
+    if weight is None:
+        weight = wp.zeros(1, dtype=wp.float32, device=d)
+    root = _canonical_root(tree)
+    qa = wp.full(1, root, dtype=wp.int32, device=d)
+    qb = wp.full(1, root, dtype=wp.int32, device=d)
+    parts, total, rounds = [], 0, 0
+    while qa.size > 0:
+        stages.check()
+        rounds += 1
+        q = qa.size
+        decision, out_count, link_count = (wp.empty(q, dtype=wp.int32, device=d) for _ in range(3))
+        values = wp.empty(q, dtype=wp.vec4, device=d)
+        seen = wp.empty(q, dtype=wp.vec2, device=d)
+        device_mod.launch(_oracle_kernel, q,
+                          [qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
+                           int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, decision,
+                           out_count, link_count, values, seen, traced],
+                          dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
+        out_offset = wp.empty(q, dtype=wp.int32, device=d)
+        link_offset = wp.empty(q, dtype=wp.int32, device=d)
+        wp.utils.array_scan(out_count, out_offset, inclusive=False)
+        wp.utils.array_scan(link_count, link_offset, inclusive=False)
+        n_next = _int(out_offset, q - 1) + _int(out_count, q - 1)
+        n_links = _int(link_offset, q - 1) + _int(link_count, q - 1)
+        total += n_links
+        if total * BYTES_PER_LINK + (q + n_next) * BYTES_PER_CANDIDATE > oracle.budget:
+            return None
+        next_a, next_b, la, lb = (wp.empty(k, dtype=wp.int32, device=d) for k in (n_next, n_next, n_links, n_links))
+        lvalues = wp.empty(n_links, dtype=wp.vec4, device=d)
+        lvisible = wp.empty(n_links, dtype=wp.vec2, device=d)
+        device_mod.launch(_scatter_kernel, q, [qa, qb, t, decision, out_offset, link_offset, values, seen,
+                                               next_a, next_b, la, lb, lvalues, lvisible], dev)
+        if n_links:
+            parts.append((la, lb, lvalues, lvisible))
+        qa, qb = next_a, next_b
+    out = [wp.empty(total, dtype=dt, device=d) for dt in (wp.int32, wp.int32, wp.vec4, wp.vec2)]
+    start = 0
+    for part in parts:
+        for dst, src in zip(out, part):
+            wp.copy(dst, src, dest_offset=start, count=src.size)
+        start += part[0].size
+    return (*out, rounds)
+
+
+def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
+    """The links of ``problem``'s tree chosen by ``oracle``. ``radiance`` (float32[n,3] per
+    element, a first estimate; None: geometric only) weights the oracle (``weights``) and draws
+    the sample leaves (``sampling``). Warns through ``problem.stages`` when the budget raised the
+    threshold; BakeError when not even the coarsest links fit."""
+    tree, dev, stages = problem.tree, problem.device, problem.stages
+    d = dev.name
+    t0 = time.perf_counter()
+    lum = None if radiance is None else leaf_luminance(tree, radiance)
+    weight = None if lum is None else weights(tree, lum)
+    sm = sampling(tree, lum, SAMPLE_FLOOR)
+    threshold = float(oracle.threshold)
+    traced = wp.zeros(1, dtype=wp.int64, device=d)
+    # Over the budget, the threshold is raised in trial builds without rays (cheap; the links a
+    # partial visibility splits need a margin), then the links are made for real.
+    trial = Oracle(threshold, rays=0, visibility=False, budget=int(oracle.budget / TRIAL_MARGIN))
+    made = _create(problem, oracle, threshold, sm, weight, traced)
+    while made is None:
+        if threshold >= COARSEST:
+            raise BakeError(f"the links of {problem.elements.count} elements do not fit the link "
+                            f"budget of {oracle.budget / 2**20:.0f} MB even at the coarsest "
+                            f"threshold: raise the link memory (--link-memory)")
+        threshold = min(threshold * RAISE, COARSEST)
+        if threshold < COARSEST and _create(problem, trial, threshold, sm, weight, traced) is None:
+            continue
+        made = _create(problem, oracle, threshold, sm, weight, traced)
+    la, lb, lvalues, lvisible, rounds = made
+    pairs = la.size
+    if threshold > oracle.threshold:
+        stages.warn(f"the links did not fit the link budget of {oracle.budget / 2**20:.0f} MB at "
+                    f"threshold {oracle.threshold:g}: {2 * pairs} links made at threshold "
+                    f"{threshold:g} (coarser, less accurate); raise --link-memory for the finer links")
+
+    n = tree.count
+    count = 2 * pairs
+    keys = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
+    values = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
+    device_mod.launch(_directed_kernel, pairs, [la, lb, keys, values], dev)
+    wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
+    out = LinkSet()
+    out.offsets = wp.zeros(n + 1, dtype=wp.int32, device=d)
+    out.sender = wp.empty(max(count, 1), dtype=wp.int32, device=d)
+    out.transfer = wp.empty(max(count, 1), dtype=wp.float32, device=d)
+    out.form_factor = wp.empty(max(count, 1), dtype=wp.float32, device=d)
+    out.visible = wp.empty(max(count, 1), dtype=wp.uint8, device=d)
+    device_mod.launch(_csr_kernel, count, [count, n, keys, values, la, lb, lvalues, lvisible, out], dev)
+    if dev.is_cuda:
+        wp.synchronize_device(d)
+    return Links(set=out, pairs=pairs, threshold=threshold, rounds=rounds,
+                 rays_traced=int(traced.numpy()[0]),
+                 seconds=time.perf_counter() - t0)

@@ -1,0 +1,47 @@
+"""A scene far from the world origin bakes as it does at the origin: the core works relative to
+the scene's centre (``SceneData.recentred``) and offsets rays by the float32 spacing at each point
+(``core.rays``), not by a fraction of the scene size."""
+import numpy as np
+import pytest
+
+import shapes
+from radiosity_baker.core import Settings, bake, metrics
+from radiosity_baker.core.scene import LAMP_POINT, LAMP_SUN, Lamps
+
+TOLERANCE = 0.005  # relative RMSE and bias against the bake at the origin
+
+
+def lit_yard(offset: float):
+    """A 10 m ground of 0.5 m quads with a 2 m box on it, under a low sun and a point lamp, the
+    whole scene moved by (offset, offset, 0) m — in float32 world coordinates, as a naive caller
+    would give them (origin 0)."""
+    ground = shapes.grid(10.0, 20)
+    box = shapes.icosphere(1.0, 2, inward=False)
+    box = (box[0] * np.array([1.0, 1.0, 0.6], np.float32) + np.array([1.0, 0.5, 0.6], np.float32),
+           box[1], box[2])
+    sun = shapes.lamp(LAMP_SUN, direction=(-0.6, -0.3, -0.74), size=(0.05, 0.0), power=(4.0,) * 3)
+    point = shapes.lamp(LAMP_POINT, position=(-2.0, -1.0, 2.5), size=(0.1, 0.0), power=(400.0,) * 3)
+    sc = shapes.scene([(*ground, (0.6,) * 3, (0,) * 3), (*box, (0.7, 0.5, 0.3), (0,) * 3)],
+                      Lamps.concat([sun, point]))
+    shift = np.array([offset, offset, 0.0])
+    sc.positions = (sc.positions.astype(np.float64) + shift).astype(np.float32)
+    sc.lamps.position = (sc.lamps.position.astype(np.float64) + shift).astype(np.float32)
+    return sc
+
+
+@pytest.fixture(scope="module")
+def at_origin():
+    return {m: bake(lit_yard(0.0), Settings(method=m, device="cpu", light_samples=16))
+            for m in ("direct", "reference")}
+
+
+@pytest.mark.parametrize("offset", [1e3, 1e4, 1e5])
+@pytest.mark.parametrize("method", ["direct", "reference"])
+def test_a_scene_far_from_the_origin_bakes_as_at_the_origin(at_origin, method, offset):
+    far = bake(lit_yard(offset), Settings(method=method, device="cpu", light_samples=16))
+    near = at_origin[method]
+    assert near.direct.max() > 0.5 and (near.direct == 0).any()  # lit and shadowed vertices
+    rmse = metrics.relative_rmse(far.lighting, near.lighting)
+    bias = metrics.mean_bias(far.lighting, near.lighting)
+    print(f"\n{method} at {offset:g} m: relative RMSE {rmse:.5f}, bias {bias:+.5f}")
+    assert rmse <= TOLERANCE and abs(bias) <= TOLERANCE
