@@ -153,7 +153,7 @@ def unit(v: np.ndarray) -> np.ndarray:
 def _sobol_bits(k: int, second: int) -> wp.uint32:
     """The 32 bits of coordinate 0 (the radical inverse in base 2) or 1 (``second``) of point k
     of the Sobol (0,2)-sequence."""
-    v = wp.uint32(2147483648)
+    v = wp.uint32(1) << wp.uint32(31)  # bit 31
     r = wp.uint32(0)
     x = k
     while x > 0:

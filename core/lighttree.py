@@ -251,6 +251,19 @@ def upload(nodes: Nodes, leaves: Leaves, device: str) -> LightTree:
     return t
 
 
+def upload_empty(device: str) -> LightTree:
+    """The ``LightTree`` struct of a scene without emitters (root −1) on ``device``."""
+    t = LightTree()
+    for name in ("lo", "hi", "axis"):
+        setattr(t, name, wp.zeros(0, dtype=wp.vec3, device=device))
+    for name in ("cos_o", "sin_o", "cos_e", "power"):
+        setattr(t, name, wp.zeros(0, dtype=wp.float32, device=device))
+    for name in ("two_sided", "distant", "left", "right", "first", "count", "leaf_kind", "leaf_index"):
+        setattr(t, name, wp.zeros(0, dtype=wp.int32, device=device))
+    t.root = -1
+    return t
+
+
 @wp.func
 def _cos_past(cos_a: float, cos_b: float, sin_b: float) -> float:
     """cos(max(0, a − b)) for angles a ∈ [0, π] (given its cosine) and b (cosine, sine; b ≥ π
