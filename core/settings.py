@@ -122,7 +122,7 @@ class Settings:
                              "thing ever replaced; a UV map, another attribute or a vertex group "
                              "of that name stops the bake", "output")
     device: str = _option("auto", "Device", "where the computation runs", "solver", choices=DEVICES)
-    light_samples: int = _option(16, "Light Samples", "shadow rays per receiver, shared by all lamps "
+    light_samples: int = _option(64, "Light Samples", "shadow rays per receiver, shared by all lamps "
                                  "and emissive triangles by their light (softer, less noisy "
                                  "shadows)", "solver", low=1, soft_high=256, flag="--samples")
     light_selection: str = _option("auto", "Light Selection", "how shadow rays are shared among "
@@ -182,7 +182,7 @@ class Settings:
                                   "lightmap", choices=TEXEL_INDIRECT)
     texel_shadows: str = _option("adaptive", "Texel Shadows", "shadow rays per lightmap texel",
                                  "lightmap", choices=TEXEL_SHADOWS)
-    shadow_budget: int = _option(64, "Shadow Budget", "most shadow rays a texel traces in a "
+    shadow_budget: int = _option(256, "Shadow Budget", "most shadow rays a texel traces in a "
                                  "penumbra (adaptive texel shadows: elsewhere one per texel, or "
                                  "the light samples where a shadow edge passes)", "lightmap", low=1,
                                  soft_high=1024)

@@ -80,7 +80,7 @@ def test_cornell_lightmap_matches_a_cycles_image_bake(tmp_path):
     names = sorted(o.name for o in bpy.context.scene.objects if o.type == "MESH" and o.name != "Light")
     before = _user_state()
     settings = Settings(method="reference", target="lightmap", output=str(tmp_path), max_size=MAX_SIZE,
-                        texel_density=1000.0, padding=2, supersample=2)
+                        atlas_pages="one", texel_density=1000.0, padding=2, supersample=2)
     assert settings.texel_indirect == "gather"
     t0 = time.perf_counter()
     job = BakeJob(settings, names)
