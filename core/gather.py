@@ -32,7 +32,7 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .formfactor import PLANE_EPS, disk_ff, fan_ff, triangle_ff
+from .formfactor import disk_ff, fan_ff
 from .hemisphere import BINS, CELL, bins_vec, frame_of, splat_of
 from .hierarchy import Nodes
 from .problem import Surfels
@@ -67,41 +67,41 @@ class Gather:
 
 @wp.func
 def cluster_ff(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float,
-               leaves: float) -> wp.vec2:
-    """Form factors (front, back) of a cluster of ``leaves`` disks: as many disks of its mean area
-    at its centre (their sum, not one disk of the whole area, whose π d² + A denominator would be
-    too large) for aligned normals (spread 1), facing with nq (front) or against it (back); an
-    isotropic blob of projected area A/4 (a closed convex surface's mean) where they cancel
-    (spread 0), the same from either side; linearly between."""
+               leaves: float) -> float:
+    """Form factor of a cluster of ``leaves`` disks: as many disks of its mean area at its centre
+    (their sum, not one disk of the whole area, whose π d² + A denominator would be too large) for
+    aligned normals (spread 1); an isotropic blob of projected area A/4 (a closed convex surface's
+    mean) where they cancel (spread 0); linearly between."""
     d = q - p
     d2 = wp.dot(d, d)
     if d2 <= 0.0:
-        return wp.vec2(0.0, 0.0)
-    inv = 1.0 / wp.sqrt(d2)
-    cos_r = wp.max(wp.dot(n, d) * inv, 0.0)
+        return 0.0
+    cos_r = wp.max(wp.dot(n, d) / wp.sqrt(d2), 0.0)
     each = area / leaves
-    iso = (1.0 - spread) * 0.25 * area * cos_r / (3.141592653589793 * d2 + 0.25 * each)
-    # disk_ff of both faces at once: cos_E is −nq·d̂ for the front and +nq·d̂ for the back
-    cos_e = -wp.dot(nq, d) * inv
-    disks = spread * leaves * each * cos_r / (3.141592653589793 * d2 + each)
-    return wp.vec2(disks * wp.max(cos_e, 0.0) + iso, disks * wp.max(-cos_e, 0.0) + iso)
+    iso = 0.25 * area * cos_r / (3.141592653589793 * d2 + 0.25 * each)
+    return spread * leaves * disk_ff(p, n, q, nq, each) + (1.0 - spread) * iso
 
 
-def fan_centres(problem) -> np.ndarray:
-    """float32[n,3]: the area-weighted centre of each element's share of its triangles (a third
-    each, around its vertex; the vertex itself where they have no area)."""
-    els, scene = problem.elements, problem.scene
-    pos = np.asarray(scene.positions, np.float64)
-    counts = np.diff(els.fan_offsets)
-    owner = np.repeat(np.arange(els.count), counts)
-    corners = pos[scene.triangles[els.fan_triangles[:els.fan_offsets[-1]]]]
-    w = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    pv = pos[els.vertex]
-    acc = np.zeros((els.count, 3))
-    np.add.at(acc, owner, w[:, None] * 0.5 * (pv[owner] + corners.mean(axis=1)))
-    total = np.bincount(owner, weights=w, minlength=els.count)
-    out = np.where(total[:, None] > 0, acc / np.where(total > 0, total, 1.0)[:, None], pv)
-    return out.astype(np.float32)
+@wp.func
+def fan_centre(e: int, vertex: wp.array(dtype=wp.int32), fan_offsets: wp.array(dtype=wp.int32),
+               fan_triangles: wp.array(dtype=wp.int32), tris: wp.array(dtype=wp.int32),
+               points: wp.array(dtype=wp.vec3)) -> wp.vec3:
+    """The area-weighted centre of element e's share of its triangles (a third each, around its
+    vertex)."""
+    total = float(0.0)
+    acc = wp.vec3(0.0)
+    pv = points[vertex[e]]
+    for k in range(fan_offsets[e], fan_offsets[e + 1]):
+        tri = fan_triangles[k]
+        a = points[tris[3 * tri]]
+        b = points[tris[3 * tri + 1]]
+        c = points[tris[3 * tri + 2]]
+        w = wp.length(wp.cross(b - a, c - a))
+        total += w
+        acc += w * (pv + (a + b + c) / 3.0) * 0.5
+    if total > 0.0:
+        return acc / total
+    return pv
 
 
 @wp.func
@@ -111,124 +111,54 @@ def leaf_blend(d2: float, area: float) -> float:
 
 
 @wp.func
-def leaf_direction(t: Nodes, centres: wp.array(dtype=wp.vec3), node: int, p: wp.vec3,
-                   d2: float) -> wp.vec3:
-    """Where a leaf lies as seen from p: its disk's centre far away; within about the element's
-    own size, where that direction is no longer where its triangles are (and undefined for a
-    receiver on the element), towards the centre of its triangles (``fan_centres``), blended in."""
-    toward = wp.clamp((d2 / t.area[node] - 0.25) / 0.75, 0.0, 1.0)
-    v = t.position[node] - p
-    if toward < 1.0:
-        v = toward * v + (1.0 - toward) * (centres[t.element[node]] - p)
-    return wp.normalize(v)
-
-
-@wp.func
-def fan_sides(p: wp.vec3, n: wp.vec3, j: int, s: Surfels) -> wp.vec2:
-    """``formfactor.fan_ff`` of both sides of element j at once: (front, back), each of its
-    triangles counting for the side p lies on."""
-    front = float(0.0)
-    back = float(0.0)
-    for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        tri = s.fan_triangles[k]
-        a = s.points[s.tris[3 * tri]]
-        b = s.points[s.tris[3 * tri + 1]]
-        c = s.points[s.tris[3 * tri + 2]]
-        nt = wp.cross(b - a, c - a)
-        h = wp.dot(p - a, nt)
-        lnt = wp.length(nt)
-        eps = PLANE_EPS * lnt * (wp.length(p - a) + wp.sqrt(lnt))
-        if h > eps:
-            front += triangle_ff(p, n, a, b, c)
-        elif -h > eps:
-            back += triangle_ff(p, n, a, b, c)
-    return wp.vec2(front, back) / 3.0
-
-
-@wp.func
-def leaf_transfer(t: Nodes, s: Surfels, node: int, p: wp.vec3, n: wp.vec3, d2: float) -> wp.vec4:
-    """(front far, back far, front exact, back exact) form factors of leaf ``node`` from p (normal
-    n): the disk beyond NEAR, the element's own triangles inside, blended over ±10 %."""
-    a = t.area[node]
-    q = t.position[node]
-    nq = t.normal[node]
+def leaf_transfer(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, a: float, e: int, d2: float,
+                  fan_offsets: wp.array(dtype=wp.int32), fan_triangles: wp.array(dtype=wp.int32),
+                  tris: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3)) -> wp.vec4:
+    """(front far, back far, front exact, back exact) form factors of a leaf (disk at q, normal nq,
+    area a, element e) from p (normal n) at squared distance d2: the disk beyond NEAR, the
+    element's own triangles inside, blended over ±10 %."""
     blend = leaf_blend(d2, a)
     out = wp.vec4(0.0)
     if blend > 0.0:
         out[0] = blend * disk_ff(p, n, q, nq, a)
         out[1] = blend * disk_ff(p, n, q, -nq, a)
     if blend < 1.0:
-        e = t.element[node]
         # A surface facing the receiver in its own plane is in contact with it (a box resting on
         # the floor): seen from a hair off the receiver, as Cycles' offset rays see it, it covers
         # the hemisphere instead of vanishing edge-on.
+        pe = p
         if wp.dot(nq, n) < 0.0:
             pe = p - n * (CONTACT * wp.sqrt(a))
-            out[2] = (1.0 - blend) * fan_ff(pe, n, e, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-            out[3] = (1.0 - blend) * fan_ff(p, n, e, -1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-        else:
-            sides = (1.0 - blend) * fan_sides(p, n, e, s)
-            out[2] = sides[0]
-            out[3] = sides[1]
+        out[2] = (1.0 - blend) * fan_ff(pe, n, e, 1.0, fan_offsets, fan_triangles, tris, points)
+        out[3] = (1.0 - blend) * fan_ff(p, n, e, -1.0, fan_offsets, fan_triangles, tris, points)
     return out
 
 
-@wp.struct
-class Cover:
-    """What a receiver's hemisphere cells hold during a gather: per cell the far front cover, its
-    largest single far part, the far back cover, the near-field front and back cover, and the far
-    front light per channel; near_light is the near field's light (never capped)."""
-
-    front: bins_vec
-    peak: bins_vec
-    back: bins_vec
-    near: bins_vec
-    near_back: bins_vec
-    red: bins_vec
-    green: bins_vec
-    blue: bins_vec
-    near_light: wp.vec3
-
-
 @wp.func
-def _cover(front: bins_vec, peak: bins_vec, back: bins_vec, near: bins_vec, near_back: bins_vec,
-           red: bins_vec, green: bins_vec, blue: bins_vec, near_light: wp.vec3) -> Cover:
-    c = Cover()
-    c.front = front
-    c.peak = peak
-    c.back = back
-    c.near = near
-    c.near_back = near_back
-    c.red = red
-    c.green = green
-    c.blue = blue
-    c.near_light = near_light
-    return c
-
-
-@wp.func
-def cover_resolve(c: Cover) -> wp.vec4:
-    """(occlusion, light r, g, b): each cell covered at most once. Near-field parts count whole,
-    and so does the largest single far part (a wide sender can exceed a cell); stacked parts fill
-    what they leave. Front and back faces of one closed object show the same directions: the
-    larger of the two, not their sum. Senders stacked in one cell share what is left of it: their
-    mean radiance."""
+def resolve(near: bins_vec, near_back: bins_vec, front: bins_vec, back: bins_vec, peak: bins_vec,
+            red: bins_vec, green: bins_vec, blue: bins_vec, near_light: wp.vec3) -> wp.vec4:
+    """(occlusion, light r, g, b) of a receiver from its cells: per cell the near-field front and
+    back cover, the far front and back cover, the largest single far front part and the far
+    front light per channel; near_light the near field's light. Each cell is covered at most
+    once: near-field parts count whole, and so does the largest single far part (a wide sender can
+    exceed a cell); stacked parts fill what they leave. Front and back faces of one closed object
+    show the same directions: the larger of the two, not their sum. Senders stacked in one cell
+    share what is left of it: their mean radiance."""
     occ = float(0.0)
-    light = c.near_light
+    light = near_light
     for b in range(BINS):
-        blocked = wp.max(c.near[b], c.near_back[b])
-        fill = wp.max(c.front[b] + c.near[b], c.back[b] + c.near_back[b])
-        occ += wp.max(wp.max(blocked, c.peak[b]), wp.min(fill, CELL))
-        f = c.front[b]
+        blocked = wp.max(near[b], near_back[b])
+        fill = wp.max(front[b] + near[b], back[b] + near_back[b])
+        occ += wp.max(wp.max(blocked, peak[b]), wp.min(fill, CELL))
+        f = front[b]
         if f > 0.0:
-            light += wp.vec3(c.red[b], c.green[b], c.blue[b]) * wp.min(1.0, wp.max(CELL - blocked, c.peak[b]) / f)
+            light += wp.vec3(red[b], green[b], blue[b]) * wp.min(1.0, wp.max(CELL - blocked, peak[b]) / f)
     return wp.vec4(occ, light[0], light[1], light[2])
 
 
 @wp.kernel
 def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=wp.vec3), t: Nodes,
-                   s: Surfels, centres: wp.array(dtype=wp.vec3), distance: float, open_k: float,
-                   with_light: int,
+                   s: Surfels, distance: float, open_k: float, with_light: int,
                    radiance: wp.array(dtype=wp.vec3), out_access: wp.array(dtype=wp.float32),
                    out_bent: wp.array(dtype=wp.vec3), out_light: wp.array(dtype=wp.vec3),
                    out_visits: wp.array(dtype=wp.int32)):
@@ -236,6 +166,7 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     p = rp[i]
     n = rn[i]
     f = frame_of(n)
+    # the receiver's cells (see resolve)
     front = bins_vec()
     peak = bins_vec()
     back = bins_vec()
@@ -252,11 +183,13 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     while cut.node >= 0:
         node = cut.node
         visits += 1
-        v = t.position[node] - p
+        q = t.position[node]
+        v = q - p
         r = t.radius[node]
         d2 = wp.dot(v, v)
         dist = wp.sqrt(d2)
-        if dist - r >= distance or wp.dot(v, n) <= -r or t.area[node] <= 0.0:
+        area = t.area[node]
+        if dist - r >= distance or wp.dot(v, n) <= -r or area <= 0.0:
             cut = cut_skip(cut, t.next[node])
             continue
         level = t.level[node]
@@ -264,54 +197,52 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
         child = t.descend[node]
         part = wp.vec4(0.0)
         take = float(1.0)
-        leaf = child < 0
-        if leaf:
+        dhat = v / dist
+        if child < 0:
             if dist < distance:
-                part = w * leaf_transfer(t, s, node, p, n, d2)
+                e = t.element[node]
+                part = w * leaf_transfer(p, n, q, t.normal[node], area, e, d2, s.fan_offsets,
+                                         s.fan_triangles, s.tris, s.points)
+                # Within about the element's own size the direction to its disk's centre is no
+                # longer where its triangles are (and undefined for a receiver on the element):
+                # towards the centre of its triangles instead, blended in.
+                toward = wp.clamp((d2 / area - 0.25) / 0.75, 0.0, 1.0)
+                if toward < 1.0 and part[0] + part[1] + part[2] + part[3] > 0.0:
+                    centre = fan_centre(e, s.vertex, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+                    dhat = wp.normalize(toward * v + (1.0 - toward) * (centre - p))
         else:
             # Never nearer than a leaf would take its exact form factor: a chain of one-child
             # cells over a single disk must reach that leaf's near field.
-            take = opening(d2, r, NEAR * t.area[node], open_k)
+            take = opening(d2, r, NEAR * area, open_k)
             if take > 0.0:
                 # A far node straddling the AO distance counts with the part of its depth inside
                 # (opening it down to the leaves would visit a whole shell of them per receiver).
                 share = w * take * wp.clamp((distance - dist + r) / (2.0 * r), 0.0, 1.0)
-                sides = share * cluster_ff(p, n, t.position[node], t.normal[node], t.area[node],
-                                           t.spread[node], t.leaves[node])
-                part[0] = sides[0]
-                part[1] = sides[1]
+                nq = t.normal[node]
+                part[0] = share * cluster_ff(p, n, q, nq, area, t.spread[node], t.leaves[node])
+                part[1] = share * cluster_ff(p, n, q, -nq, area, t.spread[node], t.leaves[node])
         cut = cut_advance(cut, level, child, t.level[wp.max(child, 0)], t.next[node], take)
         total = part[0] + part[1] + part[2] + part[3]
         if total > 0.0:
-            dhat = v / dist
-            if leaf:
-                dhat = leaf_direction(t, centres, node, p, d2)
             raw += total
             dirsum += dhat * total
             light = wp.vec3(0.0)
             if with_light != 0:
                 light = radiance[node]
-            # the sender's parts (far front, far back, exact front, exact back) and its radiance
-            # into the cells around its direction, in local tables (updated in place: a struct
-            # field's table would be copied on every access)
             sp = splat_of(f, dhat)
-            for c in range(4):
-                cell = sp.cells[c]
-                wc = sp.weights[c]
-                if part[0] > 0.0:
-                    fc = part[0] * wc
-                    front[cell] += fc
-                    peak[cell] = wp.max(peak[cell], fc)
-                    red[cell] += light[0] * fc
-                    green[cell] += light[1] * fc
-                    blue[cell] += light[2] * fc
-                if part[1] > 0.0:
-                    back[cell] += part[1] * wc
-                if part[2] > 0.0 or part[3] > 0.0:
-                    near[cell] += part[2] * wc
-                    near_back[cell] += part[3] * wc
+            for k in range(4):  # the splat's cells, updated in place
+                c = sp.cells[k]
+                wk = sp.weights[k]
+                front[c] += part[0] * wk
+                peak[c] = wp.max(peak[c], part[0] * wk)
+                back[c] += part[1] * wk
+                near[c] += part[2] * wk
+                near_back[c] += part[3] * wk
+                red[c] += light[0] * part[0] * wk
+                green[c] += light[1] * part[0] * wk
+                blue[c] += light[2] * part[0] * wk
             near_light += light * part[2]
-    res = cover_resolve(_cover(front, peak, back, near, near_back, red, green, blue, near_light))
+    res = resolve(near, near_back, front, back, peak, red, green, blue, near_light)
     occ = res[0]
     out_access[i] = wp.clamp(1.0 - occ, 0.0, 1.0)
     out_visits[i] = visits
@@ -351,9 +282,7 @@ def gather(problem, points: np.ndarray, normals: np.ndarray, distance: float,
         _gather_kernel, count,
         [wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
-         tree.nodes, problem.surfels,
-         wp.array(fan_centres(problem), dtype=wp.vec3, device=d), float(distance), float(open_k),
-         int(with_light), radiance,
+         tree.nodes, problem.surfels, float(distance), float(open_k), int(with_light), radiance,
          access, bent, light, visits],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
     return Gather(access.numpy(), bent.numpy(), light.numpy() if with_light else None, visits.numpy())

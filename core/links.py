@@ -239,7 +239,7 @@ def centroid_ff(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int) -> float:
     its centre (``gather.cluster_ff``)."""
     if t.descend[b] < 0:
         return point_ff(s, p, n, t.element[b])
-    return cluster_ff(p, n, t.position[b], t.normal[b], t.area[b], t.spread[b], t.leaves[b])[0]
+    return cluster_ff(p, n, t.position[b], t.normal[b], t.area[b], t.spread[b], t.leaves[b])
 
 
 @wp.func
