@@ -230,12 +230,11 @@ def _ms(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
 
 
 def _our_lightmap(names, size: int, output: Path):
-    """Our lightmap of ``names`` on one page of ``size`` (the reference solver, the defaults
-    otherwise), baked through the add-on so the ``Lightmap`` UVs Cycles bakes through are written:
+    """Our lightmap of ``names`` on one page of ``size`` (the default method and settings), baked through the add-on so the ``Lightmap`` UVs Cycles bakes through are written:
     (page, wall seconds from extraction to written files, timings)."""
     from radiosity_baker.addon.job import BakeJob
 
-    settings = Settings(method="reference", target="lightmap", max_size=size, texel_density=1e4,
+    settings = Settings(target="lightmap", max_size=size, texel_density=1e4,
                         padding=2, supersample=2, atlas_pages="one", reunwrap=True, output=str(output))
     t0 = time.perf_counter()
     job = BakeJob(settings, names)

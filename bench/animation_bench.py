@@ -12,7 +12,7 @@ is also baked by Cycles (DIFFUSE Direct + Indirect vertex bake) at ``--cycles-sa
 ``bench/accuracy.py``. Writes bench/results/animation-<machine>.json.
 
     .venv/bin/python bench/animation_bench.py [--sizes 20000 100000] [--frames 6]
-        [--methods direct bunnell ao] [--cycles-samples 16 64 256] [--truth-samples 1024]
+        [--methods direct bunnell ao hierarchical] [--cycles-samples 16 64 256] [--truth-samples 1024]
 """
 from __future__ import annotations
 
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[20_000, 100_000])
     parser.add_argument("--frames", type=int, default=6)
-    parser.add_argument("--methods", nargs="+", default=["direct", "bunnell", "ao"])
+    parser.add_argument("--methods", nargs="+", default=["direct", "bunnell", "ao", "hierarchical"])
     parser.add_argument("--cycles-samples", type=int, nargs="+", default=[16, 64, 256])
     parser.add_argument("--truth-samples", type=int, default=1024)
     parser.add_argument("--no-cycles", dest="cycles", action="store_false")
