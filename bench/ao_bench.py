@@ -16,7 +16,6 @@ sample scenes (needs the bpy module). Writes bench/results/ao-<hostname>.json.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import socket
 import statistics
@@ -30,7 +29,8 @@ from radiosity_baker.core import Settings, SceneData, gather, hierarchy
 from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.scene import Lamps
 
-RESULTS = Path(__file__).resolve().parent / "results"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import results_file  # noqa: E402
 
 
 def terrain(vertices: int, phase: float = 0.0) -> SceneData:
@@ -184,10 +184,7 @@ def main(argv=None) -> int:
     print("deforming", report["deforming"], flush=True)
     if args.samples:
         report["bunnell_vs_reference"] = sample_scenes()
-    RESULTS.mkdir(exist_ok=True)
-    path = RESULTS / f"ao-{socket.gethostname()}.json"
-    path.write_text(json.dumps(report, indent=2) + "\n")
-    print(f"wrote {path}")
+    results_file.write("ao", report)
     return 0
 
 

@@ -26,7 +26,6 @@ Writes bench/results/links-<hostname>.json with the machine's load before and af
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import socket
@@ -41,12 +40,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ao_bench import terrain  # noqa: E402  (the same deforming mesh as the AO benchmark)
 from rooms import room, sun  # noqa: E402
+import results_file  # noqa: E402
 
 from radiosity_baker.core import Settings, bake, links, metrics  # noqa: E402
 from radiosity_baker.core.problem import Problem  # noqa: E402
 from radiosity_baker.core.solvers import hierarchical  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parent / "results"
 ANCHOR = {"links_per_second": 50e6, "what": "Meyer et al. 2009, GTX 260: link creation for antiradiance "
           "(21 k patches, 1.1 M links in 24.2 ms)"}
 
@@ -70,7 +69,7 @@ def size_row(size: int, settings: Settings, repeat: int) -> dict:
     problem.tree  # noqa: B018  (made before the timings)
     geometric = links.Oracle(threshold=settings.link_threshold, rays=0, visibility=False,
                              budget=settings.link_memory << 20)
-    seconds, made = best(lambda: links.build(problem, geometric), repeat)
+    seconds, made = best(lambda p=problem: links.build(p, geometric), repeat)
     row = {"elements": problem.elements.count, "triangles": scene.num_triangles, "nodes": problem.tree.count,
            "create": {"seconds": round(seconds, 3), "links": made.count, "rounds": made.rounds,
                       "links_per_second": round(made.count / seconds)}}
@@ -180,10 +179,7 @@ def main(argv=None) -> int:
         report["reference"] = against_reference(args.reference_size, settings)
         print("reference", report["reference"], flush=True)
     report["load_after"] = load()
-    RESULTS.mkdir(exist_ok=True)
-    path = RESULTS / f"links-{socket.gethostname()}.json"
-    path.write_text(json.dumps(report, indent=2) + "\n")
-    print(f"wrote {path}")
+    results_file.write("links", report)
     return 0
 
 

@@ -27,7 +27,7 @@ from . import device as device_mod
 from . import lighttree
 from .formfactor import outline_ff, tangent_frame, triangle_ff
 from .rays import lift, visible
-from .scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SceneData
+from .scene import LAMP_AREA, LAMP_SPOT, LAMP_SUN, SceneData
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 

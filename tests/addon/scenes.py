@@ -1,10 +1,13 @@
 """Small scenes built in code for the add-on tests (bpy): a lit ground with a shadow."""
 import hashlib
+import importlib.util
 import math
+from pathlib import Path
 
 import bpy
 import numpy as np
 
+ROOT = Path(__file__).resolve().parents[2]
 LAMP_POWER = 1000.0  # W
 LAMP_HEIGHT = 3.0  # m above the ground
 GROUND = "Ground"
@@ -12,6 +15,15 @@ OCCLUDER = "Occluder"
 # Ground points (x, y) in m: under the lamp, lit at 2 m from it, and in the occluder's shadow at
 # the mirror point (same distance to the lamp).
 UNDER_LAMP, LIT, SHADOW = (0.0, 0.0), (-2.0, 0.0), (2.0, 0.0)
+
+
+def script(path: str):
+    """The module of the repository's script at ``path`` (``sample_blends/make_samples.py``),
+    loaded from its file (those folders are not packages)."""
+    spec = importlib.util.spec_from_file_location(Path(path).stem, ROOT / path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def expected_point_lighting(x: float, y: float) -> float:

@@ -1,9 +1,7 @@
 """Frame-range bakes: each frame as a single bake of that frame gives it, a per-frame attribute cache
 that plays back through Geometry Nodes, the current frame in the named attribute, progress per
 frame, nothing written when cancelled, the report's frames, and clearing."""
-import importlib.util
 import json
-from pathlib import Path
 
 import bpy
 import numpy as np
@@ -13,23 +11,15 @@ from radiosity_baker.addon import animation, cli
 from radiosity_baker.addon.job import BakeJob
 from radiosity_baker.core import BakeCancelled, Settings, metrics
 
-from scenes import snapshot
+from scenes import script, snapshot
 
-SAMPLES = Path(__file__).resolve().parents[2] / "sample_blends"
 FRAMES = (1, 9, 17)
-
-
-def _make_samples():
-    spec = importlib.util.spec_from_file_location("make_samples", SAMPLES / "make_samples.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture
 def room(empty_scene):
     """The sample animated room, coarse (0.25 m cells), over frames 1–17."""
-    _make_samples().animated_room(empty_scene, cell=0.25, frames=(1, 17))
+    script("sample_blends/make_samples.py").animated_room(empty_scene, cell=0.25, frames=(1, 17))
     return empty_scene
 
 

@@ -4,24 +4,15 @@ A small run (one scene, low sample counts) proves the command produces the JSON,
 tables and the plot, with every method placed on Cycles' error/time curve for lighting and AO.
 The figures of a real run are in bench/results and README; here only their shape and sense count.
 """
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _accuracy_module():
-    spec = importlib.util.spec_from_file_location("bench_accuracy", ROOT / "bench" / "accuracy.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from scenes import script
 
 
 def test_equal_error_time_interpolates_and_extrapolates_on_the_log_log_curve():
-    accuracy = _accuracy_module()
+    accuracy = script("bench/accuracy.py")
     errors, seconds = [0.4, 0.2, 0.1], [1.0, 4.0, 16.0]  # error ∝ t^-1/2
     t, extrapolated = accuracy.equal_error_seconds(errors, seconds, 0.2 / 2 ** 0.5)
     assert t == pytest.approx(8.0) and not extrapolated
@@ -31,7 +22,7 @@ def test_equal_error_time_interpolates_and_extrapolates_on_the_log_log_curve():
 
 @pytest.mark.slow
 def test_accuracy_bench_writes_tables_and_plot_for_lighting_and_ao(tmp_path):
-    accuracy = _accuracy_module()
+    accuracy = script("bench/accuracy.py")
     assert accuracy.main(["--scenes", "lamp_scene", "--methods", "direct", "bunnell",
                           "--samples", "4", "16", "--reference-samples", "64", "--device", "cpu",
                           "--output", str(tmp_path)]) == 0
@@ -60,7 +51,7 @@ def test_accuracy_bench_writes_tables_and_plot_for_lighting_and_ao(tmp_path):
 def test_accuracy_bench_lightmap_mode_places_our_page_on_cycles_curves(tmp_path):
     """Small pages: a truth at one size, Cycles' noise from pairs of bakes at a larger one, and an
     extrapolated one; each with our error, Cycles' curve and the equal-error speedups."""
-    accuracy = _accuracy_module()
+    accuracy = script("bench/accuracy.py")
     assert accuracy.main(["--lightmap", "--truth-size", "48", "--samples", "4", "16", "--reference-samples",
                           "128", "--pair-sizes", "64", "--pair-samples", "4", "16", "--extrapolated-sizes",
                           "96", "--output", str(tmp_path)]) == 0

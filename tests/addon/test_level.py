@@ -1,25 +1,16 @@
 """The benchmark level (sample_blends/make_level.py), made small: what it holds, and that it bakes
 into a multi-page lightmap atlas from the panel's operator."""
-import importlib.util
-from pathlib import Path
 
 import bpy
 import numpy as np
 
 from radiosity_baker.addon.lightmap import IMAGE_TAG
 
-SAMPLES = Path(__file__).resolve().parents[2] / "sample_blends"
-
-
-def _make_level():
-    spec = importlib.util.spec_from_file_location("make_level", SAMPLES / "make_level.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from scenes import script
 
 
 def test_the_level_holds_objects_lamps_and_emitters_and_bakes_into_a_udim_atlas(empty_scene, tmp_path):
-    counts = _make_level().build(detail=0.05)
+    counts = script("sample_blends/make_level.py").build(detail=0.05)
     assert counts["objects"] >= 100 and counts["emissive_objects"] >= 8
     kinds = sorted({ob.data.type for ob in empty_scene.objects if ob.type == "LIGHT"})
     assert kinds == ["AREA", "POINT", "SUN"]

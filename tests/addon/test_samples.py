@@ -1,22 +1,14 @@
 """The committed sample scenes hold what sample_blends/make_samples.py says they hold."""
-import importlib.util
 from pathlib import Path
 
 import bpy
 import numpy as np
 import pytest
 
-SAMPLES = Path(__file__).resolve().parents[2] / "sample_blends"
+from scenes import script
 
 
-def _load_make_samples():
-    spec = importlib.util.spec_from_file_location("make_samples", SAMPLES / "make_samples.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-make_samples = _load_make_samples()
+make_samples = script("sample_blends/make_samples.py")
 
 
 @pytest.fixture
