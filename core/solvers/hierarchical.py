@@ -253,7 +253,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                          weights: wp.array2d(dtype=wp.float32), leaf_of: wp.array(dtype=wp.int32), t: Nodes,
                          s: Surfels, ls: LinkSet, sm: Sampling, radiance: wp.array(dtype=wp.vec3),
                          above: wp.array(dtype=wp.vec3), limit: float, rays: int, seed: int,
-                         out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int64)):
+                         out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int32)):
     """Receiver i (a texel): for each element it is reconstructed from (weights), what the links of
     that element's root path bring to the texel's point and normal — the links' transfer scaled
     by the sender's ``centroid_ff`` from the texel over the link's normaliser; the element's own
@@ -301,7 +301,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
         if x >= 0:
             acc += above[last] * w
     out[i] = acc
-    wp.atomic_add(traced, 0, wp.int64(count))
+    traced[i] = count  # per texel: Warp's CPU atomics are not atomic across our threads
 
 
 def texel_gather(problem, links, lighting: np.ndarray, receivers, progress=None):
@@ -316,7 +316,7 @@ def texel_gather(problem, links, lighting: np.ndarray, receivers, progress=None)
     leaf_of[tree.order.numpy()] = np.arange(problem.elements.count, dtype=np.int32)
     radiance = node_means(tree, exitance)
     out = wp.empty(count, dtype=wp.vec3, device=d)
-    traced = wp.zeros(1, dtype=wp.int64, device=d)
+    traced = wp.zeros(count, dtype=wp.int32, device=d)
 
     def arr(x, dtype):
         return wp.array(np.ascontiguousarray(x), dtype=dtype, device=d)
@@ -329,7 +329,7 @@ def texel_gather(problem, links, lighting: np.ndarray, receivers, progress=None)
          problem.surfels, links.set, sm, radiance, _above(problem, links, radiance), float(LEAF_LIMIT),
          int(settings.visibility_rays), int(settings.seed) + 104729, out, traced],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
-    return out.numpy(), int(traced.numpy()[0])
+    return out.numpy(), int(traced.numpy().sum(dtype=np.int64))
 
 
 def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
