@@ -247,6 +247,18 @@ def solve(problem) -> Solution:
                                   "link_threshold": links.threshold, "leaf_evaluations": evaluations})
 
 
+@wp.func
+def on_path(t: Nodes, leaf: int, x: int) -> int:
+    """1 when node x lies on the path from ``leaf`` to the root, else 0."""
+    y = leaf
+    size = t.leaves[x]
+    while y >= 0 and t.leaves[y] <= size:
+        if y == x:
+            return 1
+        y = t.parent[y]
+    return 0
+
+
 @wp.kernel
 def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=wp.vec3),
                          rsize: wp.array(dtype=wp.float32), corners: wp.array2d(dtype=wp.int32),
@@ -259,7 +271,9 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
     by the sender's ``centroid_ff`` from the texel over the link's normaliser; the element's own
     links to leaves exactly, with a ray to each; links its rays found partly visible with the
     visible fraction of ``rays`` rays from the texel to points drawn on the sender by radiance;
-    the share of receivers with more than ``limit`` leaves as they received it (``above``)."""
+    the share of receivers with more than ``limit`` leaves as they received it (``above``). The
+    corners' paths meet a few levels up: a node on several is evaluated once, with their weights
+    summed, by the first corner that reaches it."""
     i = wp.tid() + offset
     p = rp[i]
     n = rn[i]
@@ -275,6 +289,19 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
         x = k
         last = k
         while x >= 0 and t.leaves[x] <= limit:
+            shared = w
+            for c2 in range(corners.shape[1]):
+                w2 = weights[i, c2]
+                if c2 != c and w2 > 0.0 and shared > 0.0:
+                    if on_path(t, leaf_of[corners[i, c2]], x) != 0:
+                        if c2 < c:
+                            shared = 0.0  # done with the earlier corner
+                        else:
+                            shared += w2
+            if shared <= 0.0:
+                last = x
+                x = t.parent[x]
+                continue
             for j in range(ls.offsets[x], ls.offsets[x + 1]):
                 b = ls.sender[j]
                 glow = radiance[b]
@@ -295,7 +322,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                             h += visible(s.mesh, origin, lift(q, s.nrm[e], wp.sqrt(s.area[e])))
                         f *= h / float(rays) * 255.0 / float(seen)  # the texel's visible fraction for the link's
                         count += rays
-                acc += glow * (w * f)
+                acc += glow * (shared * f)
             last = x
             x = t.parent[x]
         if x >= 0:
