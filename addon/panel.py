@@ -44,7 +44,7 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col = layout.column(heading="Lightmap")
         col.active = s.target != "vertex_colors"
         for name in ("texel_density", "max_size", "atlas_pages", "padding", "layout", "output",
-                     "hookup", "reunwrap", "supersample", "texel_indirect", "texel_shadows",
+                     "hookup", "reunwrap", "supersample", "texel_indirect", "texel_links", "texel_shadows",
                      "shadow_budget", "lightmap_format", "pack_images"):
             _prop(col, s, name)
         ob = context.object

@@ -180,6 +180,10 @@ class Settings:
                                "lightmap", low=1, high=8)
     texel_indirect: str = _option("gather", "Texel Indirect", "indirect light per texel",
                                   "lightmap", choices=TEXEL_INDIRECT)
+    texel_links: bool = _option(False, "Texel Links", "hierarchical radiosity: gather each texel's "
+                                "indirect light over the solver's links with rays from the texel "
+                                "(sharp indirect shadows of small nearby occluders; several times "
+                                "slower) instead of over the element tree", "lightmap")
     texel_shadows: str = _option("adaptive", "Texel Shadows", "shadow rays per lightmap texel",
                                  "lightmap", choices=TEXEL_SHADOWS)
     shadow_budget: int = _option(256, "Shadow Budget", "most shadow rays a texel traces in a "

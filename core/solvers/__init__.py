@@ -42,7 +42,7 @@ SOLVERS = {info.name: info for info in (
     SolverInfo("hierarchical", "Direct light plus multi-bounce indirect light over links between "
                "element clusters with ray-cast visibility (accurate, large scenes)",
                reads=("visibility_rays", "bounces", "tolerance", "link_threshold", "link_memory",
-                      "texel_indirect")),
+                      "texel_indirect", "texel_links")),
     SolverInfo("bunnell", "Direct light plus one bounce of indirect light gathered over a disk "
                "hierarchy (fast, large scenes, approximate)", reads=("texel_indirect",)),
     SolverInfo("ao", "Ambient occlusion: the unoccluded fraction of the hemisphere within the AO "

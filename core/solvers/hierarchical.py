@@ -36,7 +36,7 @@ from ..hierarchy import Nodes, node_means
 from ..links import LinkSet, Sampling, centroid_ff, leaf_point, sample_leaf
 from ..problem import Surfels
 from ..rays import lift, visible
-from .base import Solution, iterate
+from .base import Solution, iterate, reconstruct_with_detail
 from .reference import fan_sample, point_ff
 
 
@@ -361,11 +361,13 @@ def texel_gather(problem, links, lighting: np.ndarray, receivers, progress=None)
 
 def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
     """Indirect lighting at ``receivers``: the solution at the vertices; at other points (lightmap
-    texels) the final gather over the links with ray visibility (``texel_indirect`` gather) or the
-    solution interpolated (interpolate)."""
-    values = receivers.reconstruct(solution.values)
-    if receivers.aligned or problem.settings.texel_indirect != "gather" or not len(values):
-        return values
+    texels) as the reference evaluates them (``base.reconstruct_with_detail``: interpolated, plus
+    the detail of the tree's final gather), or with ``texel_links`` the final gather over the links
+    with rays from each texel."""
+    settings = problem.settings
+    if (receivers.aligned or settings.texel_indirect != "gather" or not settings.texel_links
+            or not len(receivers)):
+        return reconstruct_with_detail(problem, solution, receivers)
     stages = problem.stages
     light, rays = stages.run("texel gather", texel_gather, problem, links_of(problem),
                              problem.direct + solution.values, receivers, stages.reporter("texel gather"))

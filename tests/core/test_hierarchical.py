@@ -102,10 +102,11 @@ def floor_target(scene):
 
 def test_lightmap_texels_show_the_indirect_shadow_of_a_small_block(tmp_path):
     """On a floor of 4×4 quads the vertices cannot hold the block's indirect shadow; the texels'
-    final gather over the links, with rays from each texel, does: behind the block (from the
+    final gather over the links (``texel_links``), with rays from each texel, does: behind the block (from the
     wall) the texels are darker than the interpolated solution says, elsewhere they agree."""
     scene = shadow_scene(4)
-    common = dict(method="hierarchical", content="indirect", device="cpu", texel_density=24.0, light_samples=4)
+    common = dict(method="hierarchical", content="indirect", device="cpu", texel_density=24.0, light_samples=4,
+                  texel_links=True)
     pages = {}
     for mode in ("gather", "interpolate"):
         r = bake(scene, Settings(texel_indirect=mode, **common),
@@ -127,7 +128,7 @@ def test_texels_at_the_vertices_agree_with_the_vertex_solution():
 
     from radiosity_baker.core import receivers
 
-    problem = Problem(box_room(), Settings(method="hierarchical", device="cpu"))
+    problem = Problem(box_room(), Settings(method="hierarchical", device="cpu", texel_links=True))
     solution = hierarchical.solve(problem)
     at = replace(receivers.at_elements(problem), aligned=False)
     texels = hierarchical.evaluate(problem, solution, at)
