@@ -72,13 +72,16 @@ def cycles_series(names, samples, reference_samples, bake_type):
 
 def equal_error_seconds(errors, seconds, target):
     """Cycles seconds at error ``target`` on the log–log curve through (seconds, errors); and
-    whether that needed extrapolation."""
+    whether that needed extrapolation. A curve of one point is extended at Monte Carlo's rate,
+    error ∝ time^(−1/2)."""
     le, lt = np.log(np.asarray(errors)), np.log(np.asarray(seconds))
     order = np.argsort(le)  # increasing error
     le, lt = le[order], lt[order]
     x = np.log(target)
     if le[0] <= x <= le[-1]:
         return float(np.exp(np.interp(x, le, lt))), False
+    if len(le) == 1:
+        return float(np.exp(lt[0] - 2.0 * (x - le[0]))), True
     i = (0, 1) if x < le[0] else (-2, -1)
     slope = (lt[i[1]] - lt[i[0]]) / (le[i[1]] - le[i[0]])
     return float(np.exp(lt[i[0]] + slope * (x - le[i[0]]))), True

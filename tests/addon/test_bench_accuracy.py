@@ -18,6 +18,8 @@ def test_equal_error_time_interpolates_and_extrapolates_on_the_log_log_curve():
     assert t == pytest.approx(8.0) and not extrapolated
     t, extrapolated = accuracy.equal_error_seconds(errors, seconds, 0.05)
     assert t == pytest.approx(64.0) and extrapolated
+    t, extrapolated = accuracy.equal_error_seconds([0.2], [2.0], 0.05)  # one point: Monte Carlo's rate
+    assert t == pytest.approx(32.0) and extrapolated
 
 
 @pytest.mark.slow
