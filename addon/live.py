@@ -282,8 +282,8 @@ class RadiosityLiveSettings(bpy.types.PropertyGroup):
     enabled: bpy.props.BoolProperty(
         name="Live Preview", default=False, update=toggle,
         description="Solve the lighting again whenever objects, lamps or materials change, into a "
-                    "'<attribute> Preview' color attribute the viewport shows (reference solves "
-                    "preview with Bunnell)")
+                    "'<attribute> Preview' color attribute the viewport shows (the multi-bounce "
+                    "methods preview with Bunnell)")
     keep: bpy.props.BoolProperty(
         name="Keep Preview", default=False,
         description="Keep the preview attribute when the preview is switched off")
