@@ -264,7 +264,7 @@ def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes,
     pyoidn = _oidn()
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / f"{scene_name}.blend"))
     names = sorted(o.name for o in bpy.context.scene.objects if o.type == "MESH" and o.name != "Light")
-    out = {"objects": names, "denoiser": "OIDN RTLightmap (pyoidn)" if pyoidn else None,
+    out = {"objects": names, "method": Settings().method, "denoiser": "OIDN RTLightmap (pyoidn)" if pyoidn else None,
            "denoiser_note": None if pyoidn else "pyoidn is not installed: no denoised curve", "sizes": {}}
     for size in [truth_size, *pair_sizes, *extrapolated_sizes]:
         page, seconds, timings = _our_lightmap(names, size, output / f"ours-{size}")
@@ -363,7 +363,8 @@ def lightmap_markdown(results) -> str:
         speed = "; ".join(f"{r[f'speedup_vs_{k}']:.1f}×{'*' if r[f'{k}_extrapolated'] else ''} vs {label}"
                           for k, label in (("cycles", "Cycles"), ("cycles_oidn", "Cycles + OIDN"))
                           if f"speedup_vs_{k}" in r)
-        lines.append(f"| {w}×{h} | **ours** (reference, {r['texels']} texels) | {r['ours_seconds']:.1f} | "
+        lines.append(f"| {w}×{h} | **ours** ({results['lightmap']['method']}, {r['texels']} texels) | "
+                     f"{r['ours_seconds']:.1f} | "
                      f"{r['ours_relative_rmse']:.4f} | {speed} | |")
     return "\n".join(lines)
 
