@@ -19,7 +19,9 @@ import math
 
 import warp as wp
 
+from . import device as device_mod
 from .formfactor import tangent_frame
+from .hierarchy import Nodes
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -86,3 +88,139 @@ def cone_cos_half(solid_angle: float) -> float:
 def solid_angle(bins: int) -> float:
     """The solid angle (sr) of one of ``bins`` bins."""
     return 4.0 * math.pi / bins
+
+
+@wp.func
+def to_world(n: wp.vec3, local: wp.vec3) -> wp.vec3:
+    """``frame_dir``'s inverse: a direction given in the frame of unit normal n, in world axes."""
+    t1, t2 = tangent_frame(n)
+    return n * local[0] + t1 * local[1] + t2 * local[2]
+
+
+@wp.func
+def bin_dir(b: int, size: int) -> wp.vec3:
+    """The unit direction at the centre of bin b, in the element's frame (``bin_of``'s inverse)."""
+    return cell_dir(b, size, 0.5, 0.5)
+
+
+@wp.func
+def cell_dir(b: int, size: int, fu: float, fv: float) -> wp.vec3:
+    """The unit direction at (fu, fv) ∈ [0, 1)² within bin b, in the element's frame (the map is
+    equal-area: uniform (fu, fv) are uniform directions over the bin)."""
+    u = (float(b % size) + fu) / float(size) * 2.0 - 1.0
+    v = (float(b // size) + fv) / float(size) * 2.0 - 1.0
+    a = wp.abs(u)
+    c = wp.abs(v)
+    z = float(1.0)
+    if a + c > 1.0:  # the folded lower half (local z < 0)
+        a, c = 1.0 - c, 1.0 - a
+        z = -1.0
+    r = a + c
+    phi = float(0.0)
+    if r > 0.0:
+        phi = c / r * 1.5707963267948966
+    q = r * wp.sqrt(wp.max(2.0 - r * r, 0.0))
+    return wp.vec3(wp.where(u < 0.0, -1.0, 1.0) * q * wp.cos(phi),
+                   wp.where(v < 0.0, -1.0, 1.0) * q * wp.sin(phi), z * (1.0 - r * r))
+
+
+# Sub-cells per side over which a bin's cosine-weighted solid angle is integrated.
+CELL_STEPS = 8
+
+
+@wp.kernel
+def _capacity_kernel(offset: int, size: int, bin_omega: float, out: wp.array(dtype=wp.float32)):
+    b = wp.tid() + offset
+    acc = float(0.0)
+    for i in range(CELL_STEPS):
+        for j in range(CELL_STEPS):
+            d = cell_dir(b, size, (float(i) + 0.5) / float(CELL_STEPS), (float(j) + 0.5) / float(CELL_STEPS))
+            acc += wp.max(d[0], 0.0)
+    out[b] = acc / float(CELL_STEPS * CELL_STEPS) * bin_omega * 0.3183098861837907
+
+
+def capacity(bins: int, device) -> wp.array:
+    """float32[bins]: each bin's form factor from its element, (1/π)∫ max(cos, 0) dω over the bin
+    (0 for back bins; the front bins sum to 1): the most lighting per unit radiance a bin passes."""
+    out = wp.empty(bins, dtype=wp.float32, device=device.name)
+    device_mod.launch(_capacity_kernel, bins, [side(bins), solid_angle(bins), out], device)
+    return out
+
+
+@wp.func
+def subtended(p: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float) -> float:
+    """Solid angle (sr) that disks of total ``area`` (m²) at q, mean unit normal nq and normal
+    ``spread`` (1 aligned, 0 an isotropic blob), subtend at p, either face: their projected area
+    over d² + A/π (which keeps it below π close up, a disk's value at its centre), at most 2π."""
+    d = q - p
+    d2 = wp.dot(d, d)
+    c = float(1.0)
+    if d2 > 0.0:
+        c = wp.abs(wp.dot(nq, d)) / wp.sqrt(d2)
+    projected = area * (spread * c + (1.0 - spread) * 0.25)
+    return wp.min(projected / (d2 + area * 0.3183098861837907), 6.283185307179586)
+
+
+@wp.func
+def cone_bin(k: int, n: wp.vec3, axis: wp.vec3, omega: float, size: int) -> int:
+    """The bin, in the frame of unit normal n, of direction k of CONE_SAMPLES over the cone
+    around unit ``axis`` of solid angle ``omega`` (sr): a link's deposits go 1/CONE_SAMPLES to each.
+    Directions on the other side of the surface than the axis are mirrored back across it: a
+    near node's cone, wider than the node, must not spill over the horizon."""
+    local = frame_dir(n, cone_sample(k, axis, cone_cos_half(omega)))
+    if (local[0] < 0.0) != (wp.dot(axis, n) < 0.0):
+        local = wp.vec3(-local[0], local[1], local[2])
+    return bin_of(local, size)
+
+
+@wp.struct
+class Masks:
+    """The bins each directed link of a ``links.LinkSet`` spreads over, made once per link build
+    (``masks``): receive: uint16[E, CONE_SAMPLES] bins, in the receiver node's frame, of the cone
+    the sender subtends at the receiver's centre (where the light arrives from); send:
+    uint16[E, CONE_SAMPLES] bins, in the sender node's frame, of the cone the receiver subtends
+    at the sender's centre (where the light leaves to); omega: float32[E] the sender's solid angle
+    at the receiver's centre (sr)."""
+
+    receive: wp.array2d(dtype=wp.uint16)
+    send: wp.array2d(dtype=wp.uint16)
+    omega: wp.array(dtype=wp.float32)
+
+
+@wp.kernel
+def _masks_kernel(offset: int, t: Nodes, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
+                  size: int, out: Masks):
+    """Receiver node x's links (one thread over its CSR range)."""
+    x = wp.tid() + offset
+    p = t.position[x]
+    for j in range(offsets[x], offsets[x + 1]):
+        b = sender[j]
+        q = t.position[b]
+        d = q - p
+        length = wp.length(d)
+        u = wp.vec3(t.normal[x])
+        if length > 0.0:
+            u = d / length
+        omega_b = subtended(p, q, t.normal[b], t.area[b], t.spread[b])
+        omega_x = subtended(q, p, t.normal[x], t.area[x], t.spread[x])
+        out.omega[j] = omega_b
+        for k in range(CONE_SAMPLES):
+            out.receive[j, k] = wp.uint16(cone_bin(k, t.normal[x], u, omega_b, size))
+            out.send[j, k] = wp.uint16(cone_bin(k, t.normal[b], -u, omega_x, size))
+
+
+def masks(problem, links, bins: int) -> Masks:
+    """The direction masks (``Masks``) of ``links`` (``links.Links`` over ``problem.tree``) for
+    ``bins`` bins, made the first time they are asked for and kept with the links (one launch)."""
+    key = ("masks", bins)
+    if key not in links.derived:
+        tree, dev = problem.tree, problem.device
+        count = max(links.count, 1)
+        out = Masks()
+        out.receive = wp.empty((count, CONE_SAMPLES), dtype=wp.uint16, device=dev.name)
+        out.send = wp.empty((count, CONE_SAMPLES), dtype=wp.uint16, device=dev.name)
+        out.omega = wp.empty(count, dtype=wp.float32, device=dev.name)
+        device_mod.launch(_masks_kernel, tree.count, [tree.nodes, links.set.offsets, links.set.sender, side(bins), out],
+                          dev)
+        links.derived[key] = out
+    return links.derived[key]

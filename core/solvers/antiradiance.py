@@ -1,0 +1,194 @@
+"""Antiradiance (Dachsbacher, Stamminger, Drettakis, Durand 2007; ALGORITHMS.md §6, §10):
+multi-bounce indirect light with no visibility at all — light goes through every surface, and
+each surface sends what arrives at its front on through its back as antiradiance A, which
+cancels the light that should not have got through.
+
+Fixed point, from A = 0: L⁽ⁱ⁺¹⁾ = E + K U(L⁽ⁱ⁾ − A⁽ⁱ⁾), A⁽ⁱ⁺¹⁾ = J U(L⁽ⁱ⁾ − A⁽ⁱ⁾), with E = ρ ⊙ D
+(D the direct lighting of ``core.direct``, already shadowed by rays, as the reference and the
+hierarchical solvers inject it), U unoccluded transport over the links (``core.links`` with
+``visibility=False, sides=2``: senders send from both faces, as antiradiance leaves by the back),
+K diffuse reflection and J pass-through. What is propagated is L − A, signed.
+
+Each tree node holds one directional table ``[nodes × bins]`` (vec3, ``core.directions``): a
+leaf's front bins hold its radiance L = ρ ⊙ (D + I), isotropic (diffuse), its back bins −A; an
+inner node's bin is the mean over its leaves, weighted by their projected area |cos| in the
+bin's centre direction, of what each shows that way. One iteration (a launch each):
+
+- front: the leaves' front bins ← ρ ⊙ (D + I);
+- pull: the inner nodes' tables from their leaves;
+- U (global pass, one thread per receiver node over its CSR links, no atomics): each link's
+  signed radiance is the mean of the sender's table over the bins the receiver subtends at it
+  (``directions.Masks``, box-filtered over the cone, made once per link build); it lands in the
+  receiver's table of incoming radiance, spread over the bins of the cone the sender subtends
+  (radiance × the cone's share of each bin's solid angle);
+- K: each element's indirect lighting I is its root-path links' unoccluded transfer at the
+  element (``implicit.path_weights`` without the nearest filter) × their signed radiance;
+- J (local pass): each leaf's back bin ← −(incoming radiance from the opposite direction, at its
+  front), summed over its root path (ancestors' tables read at the bin's centre direction).
+
+Iterations stop when the largest change of I is below ``tolerance`` × the largest lighting value,
+at most ``bounces``; each iteration's change is kept (``counts["changes"]``). Values stay signed
+(``cache["signed"]``); the solution, which is output, is clamped at 0. The tables take
+2 × nodes × bins × 3 × 4 bytes (``counts["table_bytes"]``; a warning above TABLE_WARN), float32:
+half precision was measured to cost accuracy (README).
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .. import device as device_mod
+from .. import directions
+from .. import links as links_mod
+from ..directions import Masks
+from ..hierarchy import Nodes
+from ..links import LinkSet
+from .base import Solution, iterate, reconstruct_with_detail
+from .implicit import bins_of, links_of, path_gather, path_weights
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
+# Table memory (bytes) above which the bake warns (and says what fewer bins would take).
+TABLE_WARN = 2 << 30
+
+
+@wp.kernel
+def _front_kernel(offset: int, t: Nodes, albedo: wp.array(dtype=wp.vec3), direct: wp.array(dtype=wp.vec3),
+                  indirect: wp.array(dtype=wp.vec3), size: int, table: wp.array(dtype=wp.vec3)):
+    """Leaf bin i (leaf i // bins): a front bin gets the leaf's radiance ρ ⊙ (D + I)."""
+    i = wp.tid() + offset
+    bins = size * size
+    b = i % bins
+    if directions.front(b, size):
+        e = t.element[i // bins]
+        table[i] = wp.cw_mul(albedo[e], direct[e] + indirect[e])
+
+
+@wp.kernel
+def _pull_kernel(offset: int, node0: int, t: Nodes, first_leaf: wp.array(dtype=wp.int32), size: int,
+                 table: wp.array(dtype=wp.vec3)):
+    """Inner node bin i: the |cos|-weighted mean of what the node's leaves show in the bin's
+    centre direction."""
+    i = wp.tid() + offset
+    bins = size * size
+    x = node0 + i // bins
+    w = directions.to_world(t.normal[x], directions.bin_dir(i % bins, size))
+    acc = wp.vec3(0.0)
+    total = float(0.0)
+    lo = first_leaf[x]
+    for leaf in range(lo, lo + int(t.leaves[x] + 0.5)):
+        n = t.normal[leaf]
+        weight = t.area[leaf] * wp.abs(wp.dot(n, w))
+        acc += table[leaf * bins + directions.bin_of(directions.frame_dir(n, w), size)] * weight
+        total += weight
+    out = wp.vec3(0.0)
+    if total > 0.0:
+        out = acc / total
+    table[node0 * bins + i] = out
+
+
+@wp.kernel
+def _transport_kernel(offset: int, ls: LinkSet, masks: Masks, size: int, bin_omega: float,
+                      table: wp.array(dtype=wp.vec3), sent: wp.array(dtype=wp.vec3),
+                      incoming: wp.array(dtype=wp.vec3)):
+    """U at receiver node x: each link's signed radiance (``sent``) and the incoming radiance per
+    bin at x's front (its own row of ``incoming``)."""
+    x = wp.tid() + offset
+    bins = size * size
+    row = x * bins
+    for b in range(bins):
+        incoming[row + b] = wp.vec3(0.0)
+    share = 1.0 / float(directions.CONE_SAMPLES)
+    for j in range(ls.offsets[x], ls.offsets[x + 1]):
+        base = ls.sender[j] * bins
+        v = wp.vec3(0.0)
+        for k in range(directions.CONE_SAMPLES):
+            v += table[base + int(masks.send[j, k])]
+        v *= share
+        sent[j] = v
+        spread = v * (masks.omega[j] * share / bin_omega)
+        for k in range(directions.CONE_SAMPLES):
+            b = int(masks.receive[j, k])
+            if directions.front(b, size):
+                incoming[row + b] += spread
+
+
+@wp.kernel
+def _through_kernel(offset: int, t: Nodes, size: int, incoming: wp.array(dtype=wp.vec3),
+                    table: wp.array(dtype=wp.vec3)):
+    """J at leaf bin i: a back bin gets −(the radiance arriving from the opposite direction), from
+    the incoming tables of the leaf's root path."""
+    i = wp.tid() + offset
+    bins = size * size
+    b = i % bins
+    if not directions.front(b, size):
+        k = i // bins
+        arrival = -directions.to_world(t.normal[k], directions.bin_dir(b, size))
+        acc = wp.vec3(0.0)
+        x = k
+        while x >= 0:
+            acc += incoming[x * bins + directions.bin_of(directions.frame_dir(t.normal[x], arrival), size)]
+            x = t.parent[x]
+        table[i] = -acc
+
+
+def table_bytes(nodes: int, bins: int) -> int:
+    """Bytes of the two directional tables (radiance and antiradiance, incoming) of ``nodes``
+    nodes at ``bins`` bins, float32 RGB."""
+    return 2 * nodes * bins * 3 * 4
+
+
+def check(problem) -> list[str]:
+    """A warning before the solve when the tables would be large (the tree is about 2 nodes per
+    element)."""
+    bins = bins_of(problem.settings)
+    need = table_bytes(2 * problem.elements.count, bins)
+    if need < TABLE_WARN:
+        return []
+    return [f"antiradiance tables of {problem.elements.count} elements at {bins} bins take about "
+            f"{need / 2**30:.1f} GiB; --directional-bins 64 takes {table_bytes(2 * problem.elements.count, 64) / 2**30:.2f} GiB"]
+
+
+def solve(problem) -> Solution:
+    """Indirect lighting per element (float32[n,3], irradiance/π, clamped at 0; signed in
+    ``cache["signed"]``): iterations of U, K and J until the largest change is below
+    ``tolerance`` × the largest lighting value, at most ``bounces``."""
+    settings = problem.settings
+    bins = bins_of(settings)
+    size = directions.side(bins)
+    problem.direct  # noqa: B018  (traced before the links, as the stages report it)
+    links = links_of(problem, sides=2)
+    stages = problem.stages
+    masks = stages.run("direction masks", directions.masks, problem, links, bins)
+    paths = stages.run("direction masks", path_weights, problem, links, 2)
+    tree, dev = problem.tree, problem.device
+    d = dev.name
+    n, m = problem.elements.count, tree.count
+    table = wp.zeros(m * bins, dtype=wp.vec3, device=d)
+    incoming = wp.zeros(m * bins, dtype=wp.vec3, device=d)
+    sent = wp.zeros(max(links.count, 1), dtype=wp.vec3, device=d)
+    first_leaf = links_mod.sampling(tree).first_leaf
+    inner = m - n
+    bin_omega = directions.solid_angle(bins)
+
+    def sweep(direct, current, out, k):
+        device_mod.launch(_front_kernel, n * bins, [tree.nodes, problem.surfels.albedo, direct, current, size, table],
+                          dev)
+        device_mod.launch(_pull_kernel, inner * bins, [n, tree.nodes, first_leaf, size, table], dev)
+        device_mod.launch(_transport_kernel, m, [links.set, masks, size, bin_omega, table, sent, incoming], dev)
+        path_gather(problem, links, paths, sent, out)
+        device_mod.launch(_through_kernel, n * bins, [tree.nodes, size, incoming, table], dev)
+
+    changes = []
+    signed, iterations, _, _ = iterate(problem, sweep, settings.bounces, changes)
+    memory = table_bytes(m, bins)
+    return Solution(np.maximum(signed, 0.0), {
+        "iterations": iterations, "links": links.count, "link_threshold": links.threshold,
+        "directional_bins": bins, "table_bytes": memory, "changes": changes,
+        "negative_elements": int((signed < 0).any(axis=1).sum())}, cache={"signed": signed})
+
+
+def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
+    """Indirect lighting at ``receivers``: the solution at the vertices; at other points (lightmap
+    texels) interpolated, plus the detail of the tree's final gather (``texel_indirect``)."""
+    return reconstruct_with_detail(problem, solution, receivers)

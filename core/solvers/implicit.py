@@ -1,0 +1,262 @@
+"""Implicit visibility (Dong, Kautz, Theobalt, Seidel 2007; ALGORITHMS.md §5, §10): multi-bounce
+indirect light over links made without rays, where per receiver and direction bin only the
+nearest sender counts — occluded senders drop out, so link creation is the only geometry work.
+
+The links (``core.links`` with ``visibility=False``: every pair that faces each other, refined
+by the oracle, with unoccluded transfers) are evaluated at each element over its root path — the
+links of every node above it, as the hierarchical solver's last step does (``transfer_at``).
+Once per link build, ``path_weights`` computes per element and path link a weight: the link's
+transfer at the element × the fraction of the sender's cone (``directions.cone_bin``: the solid
+angle the sender's node subtends at the element, CONE_SAMPLES directions) whose bins it wins —
+a bin goes to the nearest sender with light to give (the smallest distance between the element
+and the sender's centre; ties keep both). One thread per element over its contiguous path
+links, two passes (nearest per bin in a scratch row of its own, then the winners): no atomics.
+
+Then Jacobi iterations, as the reference solver in lighting units (irradiance/π) with D the
+direct lighting of ``core.direct``: each node's radiance is the area-weighted mean of ρ ⊙ (D + I)
+over its leaves, and each element's indirect lighting I the weighted sum over its path links of
+the senders' radiance, until the largest change is below ``tolerance``, at most ``bounces``.
+
+Known failure (§5): a small near sender wins a whole bin, hiding all of a large far one in it
+(``tests/core/test_implicit.py`` measures it); coarse bins make it worse.
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .. import device as device_mod
+from .. import directions
+from .. import links as links_mod
+from ..hierarchy import Nodes, node_means
+from ..links import LinkSet
+from ..problem import Surfels
+from .base import Solution, iterate, reconstruct_with_detail
+from .hierarchical import _exitance_kernel, first_radiance, transfer_at
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
+# Elements whose nearest-sender rows (bins × 4 bytes each) are held at once while the path
+# weights are made: 16 k × 1024 bins is 64 MB.
+SCRATCH_ROWS = 16384
+
+
+def oracle(settings, sides: int = 1) -> links_mod.Oracle:
+    """The links implicit visibility (sides 1) and antiradiance (sides 2) ask for: the settings'
+    threshold, sample pairs and budget, no visibility. Implicit visibility's, whose senders send
+    their node mean as the hierarchical solver's, are weighted by the first radiance estimate;
+    antiradiance's are geometric (its senders send what their directional tables show, which
+    already weighs each leaf by its projected area: a brightness-weighted transfer would count
+    bright leaves twice)."""
+    return links_mod.Oracle(threshold=float(settings.link_threshold), rays=int(settings.visibility_rays),
+                            visibility=False, seed=int(settings.seed), budget=int(settings.link_memory) << 20,
+                            brightness="first estimate" if sides == 1 else None, sides=sides)
+
+
+def links_of(problem, sides: int = 1):
+    """The problem's unoccluded links (built once, cached on the problem)."""
+    return problem.links(oracle(problem.settings, sides), (lambda: first_radiance(problem)) if sides == 1 else None)
+
+
+def bins_of(settings) -> int:
+    """The directional bin count the settings ask for (64, 256 or 1024)."""
+    bins = int(settings.directional_bins)
+    directions.side(bins)
+    return bins
+
+
+@wp.struct
+class Paths:
+    """Each element's root-path links as evaluated at the element: offsets int32[n+1] (leaf k's
+    path links are offsets[k] … offsets[k+1]−1, in root-path order: its own links, then its
+    parent's …); weight float32[P] what a unit radiance of the link's sender gives the element
+    (lighting, irradiance/π)."""
+
+    offsets: wp.array(dtype=wp.int32)
+    weight: wp.array(dtype=wp.float32)
+
+
+@wp.kernel
+def _path_count_kernel(offset: int, t: Nodes, ls: LinkSet, counts: wp.array(dtype=wp.int32)):
+    """Leaf k: the links of the nodes on its root path."""
+    k = wp.tid() + offset
+    c = int(0)
+    x = k
+    while x >= 0:
+        c += ls.offsets[x + 1] - ls.offsets[x]
+        x = t.parent[x]
+    counts[k] = c
+
+
+@wp.func
+def _cone_of(t: Nodes, b: int, p: wp.vec3):
+    """(unit direction, distance, solid angle) of node b's centre seen from p."""
+    d = t.position[b] - p
+    dist = wp.length(d)
+    u = wp.vec3(0.0, 0.0, 1.0)
+    if dist > 0.0:
+        u = d / dist
+    return u, dist, directions.subtended(p, t.position[b], t.normal[b], t.area[b], t.spread[b])
+
+
+@wp.func
+def _front_samples(n: wp.vec3, u: wp.vec3, omega: float, size: int) -> int:
+    """How many of a cone's CONE_SAMPLES directions fall in front bins (``directions.cone_bin``)."""
+    seen = int(0)
+    for c in range(directions.CONE_SAMPLES):
+        if directions.front(directions.cone_bin(c, n, u, omega, size), size):
+            seen += 1
+    return seen
+
+
+@wp.kernel
+def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nearest_on: int, size: int,
+                 capacity: wp.array(dtype=wp.float32), rows: int, scratch: wp.array(dtype=wp.vec3), out: Paths):
+    """Leaf k: the weight of each of its path links (see the module docstring); with
+    ``nearest_on`` 0 the plain transfer at the element (antiradiance). ``scratch`` holds ``rows``
+    rows of size² bins — (nearest distance, transfer of all senders, of the nearest) each —
+    leaf k using row k % rows (a launch wave covers at most ``rows`` leaves)."""
+    k = wp.tid() + offset
+    e = t.element[k]
+    p = s.pos[e]
+    n = s.nrm[e]
+    bins = size * size
+    row = (k % rows) * bins
+    if nearest_on != 0:
+        for b in range(bins):
+            scratch[row + b] = wp.vec3(1.0e30, 0.0, 0.0)
+        for step in range(2):  # the nearest and the transfer per bin, then the nearest's transfer
+            x = k
+            while x >= 0:
+                for j in range(ls.offsets[x], ls.offsets[x + 1]):
+                    f = transfer_at(t, s, ls, j, p, n, int(x != k), sides)
+                    u, dist, omega = _cone_of(t, ls.sender[j], p)
+                    seen = _front_samples(n, u, omega, size)
+                    if f > 0.0 and seen > 0:
+                        part = f / float(seen)
+                        for c in range(directions.CONE_SAMPLES):
+                            b = directions.cone_bin(c, n, u, omega, size)
+                            v = scratch[row + b]
+                            if step == 0:
+                                v = wp.vec3(wp.min(v[0], dist), v[1] + part, 0.0)
+                            elif dist <= v[0]:
+                                v = wp.vec3(v[0], v[1], v[2] + part)
+                            scratch[row + b] = v
+                x = t.parent[x]
+    i = out.offsets[k]
+    x = k
+    while x >= 0:
+        for j in range(ls.offsets[x], ls.offsets[x + 1]):
+            f = transfer_at(t, s, ls, j, p, n, int(x != k), sides)
+            if nearest_on != 0 and f > 0.0:
+                u, dist, omega = _cone_of(t, ls.sender[j], p)
+                seen = _front_samples(n, u, omega, size)
+                won = float(0.0)
+                for c in range(directions.CONE_SAMPLES):
+                    b = directions.cone_bin(c, n, u, omega, size)
+                    v = scratch[row + b]
+                    if directions.front(b, size) and dist <= v[0]:
+                        # the nearest speaks for what the bin passes: what every sender in it would
+                        # bring, at most the bin's own form factor — never less than its own
+                        won += wp.min(v[1], wp.max(capacity[b], v[2])) / v[2]
+                if seen > 0:
+                    f *= won / float(seen)
+            out.weight[i] = wp.max(f, 0.0)
+            i += 1
+        x = t.parent[x]
+
+
+def path_weights(problem, links, sides: int, bins: int = 0) -> Paths:
+    """The ``Paths`` of ``links`` at every element: with ``bins`` (64, 256, 1024) each link's
+    transfer × the share of its sender's cone it wins (implicit visibility), with 0 the transfer
+    alone; made once per link build and kept with the links."""
+    key = ("paths", sides, bins)
+    if key in links.derived:
+        return links.derived[key]
+    tree, dev = problem.tree, problem.device
+    d = dev.name
+    n = problem.elements.count
+    counts = wp.empty(n, dtype=wp.int32, device=d)
+    device_mod.launch(_path_count_kernel, n, [tree.nodes, links.set, counts], dev)
+    host = counts.numpy().astype(np.int64)
+    offsets = np.concatenate([[0], np.cumsum(host)])
+    if offsets[-1] >= 2**31:
+        from ..errors import BakeError
+
+        raise BakeError(f"{offsets[-1]} path links of {n} elements exceed 2^31: raise --link-threshold")
+    out = Paths()
+    out.offsets = wp.array(offsets.astype(np.int32), dtype=wp.int32, device=d)
+    out.weight = wp.empty(max(int(offsets[-1]), 1), dtype=wp.float32, device=d)
+    size = directions.side(bins) if bins else 1
+    rows = min(n, SCRATCH_ROWS) if bins else 1
+    scratch = wp.empty(rows * size * size, dtype=wp.vec3, device=d)
+    cap = directions.capacity(bins, dev) if bins else wp.zeros(1, dtype=wp.float32, device=d)
+    device_mod.launch(_path_kernel, n, [tree.nodes, problem.surfels, links.set, sides, int(bins > 0), size,
+                                        cap, rows, scratch, out], dev, chunks=-(-n // rows),
+                      on_chunk=lambda f: problem.stages.check())
+    links.derived[key] = out
+    return out
+
+
+@wp.kernel
+def _sent_kernel(offset: int, ls: LinkSet, radiance: wp.array(dtype=wp.vec3), sent: wp.array(dtype=wp.vec3)):
+    """Directed link j: its sender's radiance."""
+    j = wp.tid() + offset
+    sent[j] = radiance[ls.sender[j]]
+
+
+@wp.kernel
+def _path_gather_kernel(offset: int, t: Nodes, ls: LinkSet, paths: Paths, sent: wp.array(dtype=wp.vec3),
+                        out: wp.array(dtype=wp.vec3)):
+    """Leaf k's element: Σ over its path links of weight × what the link's sender sends it."""
+    k = wp.tid() + offset
+    acc = wp.vec3(0.0)
+    i = paths.offsets[k]
+    x = k
+    while x >= 0:
+        for j in range(ls.offsets[x], ls.offsets[x + 1]):
+            acc += sent[j] * paths.weight[i]
+            i += 1
+        x = t.parent[x]
+    out[t.element[k]] = acc
+
+
+def path_gather(problem, links, paths: Paths, sent: wp.array, out: wp.array) -> None:
+    """out (vec3[n]) ← each element's lighting over its path links, ``sent`` (vec3[E]) what each
+    directed link's sender sends along it (radiance; one launch)."""
+    device_mod.launch(_path_gather_kernel, problem.elements.count,
+                      [problem.tree.nodes, links.set, paths, sent, out], problem.device)
+
+
+def solve(problem) -> Solution:
+    """Indirect lighting per element (float32[n,3], irradiance/π): Jacobi iterations over the
+    surviving links until the largest change is below ``tolerance``, at most ``bounces``."""
+    settings = problem.settings
+    bins = bins_of(settings)
+    problem.direct  # noqa: B018  (traced before the links, as the stages report it)
+    links = links_of(problem)
+    paths = problem.stages.run("direction masks", path_weights, problem, links, 1, bins)
+    tree, dev = problem.tree, problem.device
+    d = dev.name
+    n = problem.elements.count
+    exitance = wp.empty(n, dtype=wp.vec3, device=d)
+    radiance = wp.empty(tree.count, dtype=wp.vec3, device=d)
+    sent = wp.empty(max(links.count, 1), dtype=wp.vec3, device=d)
+
+    def sweep(direct, current, out, k):
+        device_mod.launch(_exitance_kernel, n, [problem.surfels.albedo, direct, current, exitance], dev)
+        node_means(tree, exitance, radiance)
+        device_mod.launch(_sent_kernel, links.count, [links.set, radiance, sent], dev)
+        path_gather(problem, links, paths, sent, out)
+
+    changes = []
+    values, iterations, _, _ = iterate(problem, sweep, settings.bounces, changes)
+    return Solution(values, {"iterations": iterations, "links": links.count, "link_threshold": links.threshold,
+                             "directional_bins": bins, "path_links": int(paths.offsets.numpy()[-1]),
+                             "changes": changes})
+
+
+def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
+    """Indirect lighting at ``receivers``: the solution at the vertices; at other points (lightmap
+    texels) interpolated, plus the detail of the tree's final gather (``texel_indirect``)."""
+    return reconstruct_with_detail(problem, solution, receivers)
