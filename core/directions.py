@@ -72,8 +72,14 @@ def front(b: int, size: int) -> bool:
 def cone_sample(k: int, axis: wp.vec3, cos_half: float) -> wp.vec3:
     """Direction k of CONE_SAMPLES spread evenly (equal solid angle) over the cone around unit
     ``axis`` whose half angle has cosine ``cos_half``."""
+    return cone_sample_of(k, CONE_SAMPLES, axis, cos_half)
+
+
+@wp.func
+def cone_sample_of(k: int, count: int, axis: wp.vec3, cos_half: float) -> wp.vec3:
+    """Direction k of ``count`` spread evenly over the cone (as ``cone_sample``)."""
     t1, t2 = tangent_frame(axis)
-    z = 1.0 - (float(k) + 0.5) / float(CONE_SAMPLES) * (1.0 - cos_half)
+    z = 1.0 - (float(k) + 0.5) / float(count) * (1.0 - cos_half)
     r = wp.sqrt(wp.max(1.0 - z * z, 0.0))
     phi = float(k) * GOLDEN
     return axis * z + t1 * (r * wp.cos(phi)) + t2 * (r * wp.sin(phi))
@@ -124,6 +130,10 @@ def cell_dir(b: int, size: int, fu: float, fv: float) -> wp.vec3:
                    wp.where(v < 0.0, -1.0, 1.0) * q * wp.sin(phi), z * (1.0 - r * r))
 
 
+# Directions per bin a cone's solid angle is sampled with where it covers many bins (``cone_count``),
+# and the most directions one cone gets.
+PER_BIN = 4
+MAX_SAMPLES = 256
 # Sub-cells per side over which a bin's cosine-weighted solid angle is integrated.
 CELL_STEPS = 8
 
@@ -148,6 +158,13 @@ def capacity(bins: int, device) -> wp.array:
 
 
 @wp.func
+def cone_count(omega: float, bin_omega: float) -> int:
+    """Directions to sample a cone of solid angle ``omega`` with against bins of ``bin_omega``
+    (sr): PER_BIN per bin it covers, at least CONE_SAMPLES, at most MAX_SAMPLES."""
+    return wp.clamp(int(wp.ceil(float(PER_BIN) * omega / bin_omega)), CONE_SAMPLES, MAX_SAMPLES)
+
+
+@wp.func
 def subtended(p: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float) -> float:
     """Solid angle (sr) that disks of total ``area`` (m²) at q, mean unit normal nq and normal
     ``spread`` (1 aligned, 0 an isotropic blob), subtend at p, either face: their projected area
@@ -162,12 +179,12 @@ def subtended(p: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float) -
 
 
 @wp.func
-def cone_bin(k: int, n: wp.vec3, axis: wp.vec3, omega: float, size: int) -> int:
-    """The bin, in the frame of unit normal n, of direction k of CONE_SAMPLES over the cone
-    around unit ``axis`` of solid angle ``omega`` (sr): a link's deposits go 1/CONE_SAMPLES to each.
+def cone_bin(k: int, count: int, n: wp.vec3, axis: wp.vec3, omega: float, size: int) -> int:
+    """The bin, in the frame of unit normal n, of direction k of ``count`` over the cone around
+    unit ``axis`` of solid angle ``omega`` (sr): a link's deposits go 1/count to each.
     Directions on the other side of the surface than the axis are mirrored back across it: a
     near node's cone, wider than the node, must not spill over the horizon."""
-    local = frame_dir(n, cone_sample(k, axis, cone_cos_half(omega)))
+    local = frame_dir(n, cone_sample_of(k, count, axis, cone_cos_half(omega)))
     if (local[0] < 0.0) != (wp.dot(axis, n) < 0.0):
         local = wp.vec3(-local[0], local[1], local[2])
     return bin_of(local, size)
@@ -205,8 +222,8 @@ def _masks_kernel(offset: int, t: Nodes, offsets: wp.array(dtype=wp.int32), send
         omega_x = subtended(q, p, t.normal[x], t.area[x], t.spread[x])
         out.omega[j] = omega_b
         for k in range(CONE_SAMPLES):
-            out.receive[j, k] = wp.uint16(cone_bin(k, t.normal[x], u, omega_b, size))
-            out.send[j, k] = wp.uint16(cone_bin(k, t.normal[b], -u, omega_x, size))
+            out.receive[j, k] = wp.uint16(cone_bin(k, CONE_SAMPLES, t.normal[x], u, omega_b, size))
+            out.send[j, k] = wp.uint16(cone_bin(k, CONE_SAMPLES, t.normal[b], -u, omega_x, size))
 
 
 def masks(problem, links, bins: int) -> Masks:

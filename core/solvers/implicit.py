@@ -36,6 +36,9 @@ from .hierarchical import _exitance_kernel, first_radiance, transfer_at
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
+# Senders in a bin within this factor of the nearest one's distance are its layer: they keep
+# their links (neighbours on one surface are side by side, not behind each other).
+LAYER = 2.0
 # Elements whose nearest-sender rows (bins × 4 bytes each) are held at once while the path
 # weights are made: 16 k × 1024 bins is 64 MB.
 SCRATCH_ROWS = 16384
@@ -100,21 +103,21 @@ def _cone_of(t: Nodes, b: int, p: wp.vec3):
 
 
 @wp.func
-def _front_samples(n: wp.vec3, u: wp.vec3, omega: float, size: int) -> int:
-    """How many of a cone's CONE_SAMPLES directions fall in front bins (``directions.cone_bin``)."""
+def _front_samples(count: int, n: wp.vec3, u: wp.vec3, omega: float, size: int) -> int:
+    """How many of a cone's ``count`` directions fall in front bins (``directions.cone_bin``)."""
     seen = int(0)
-    for c in range(directions.CONE_SAMPLES):
-        if directions.front(directions.cone_bin(c, n, u, omega, size), size):
+    for c in range(count):
+        if directions.front(directions.cone_bin(c, count, n, u, omega, size), size):
             seen += 1
     return seen
 
 
 @wp.kernel
 def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nearest_on: int, size: int,
-                 capacity: wp.array(dtype=wp.float32), rows: int, scratch: wp.array(dtype=wp.vec3), out: Paths):
+                 capacity: wp.array(dtype=wp.float32), bin_omega: float, rows: int, scratch: wp.array(dtype=wp.vec3), out: Paths):
     """Leaf k: the weight of each of its path links (see the module docstring); with
     ``nearest_on`` 0 the plain transfer at the element (antiradiance). ``scratch`` holds ``rows``
-    rows of size² bins — (nearest distance, transfer of all senders, of the nearest) each —
+    rows of size² bins — (nearest distance, transfer of the nearest layer, of what is behind) —
     leaf k using row k % rows (a launch wave covers at most ``rows`` leaves)."""
     k = wp.tid() + offset
     e = t.element[k]
@@ -125,21 +128,24 @@ def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nea
     if nearest_on != 0:
         for b in range(bins):
             scratch[row + b] = wp.vec3(1.0e30, 0.0, 0.0)
-        for step in range(2):  # the nearest and the transfer per bin, then the nearest's transfer
+        for step in range(2):  # the nearest per bin, then the transfer of its layer and behind it
             x = k
             while x >= 0:
                 for j in range(ls.offsets[x], ls.offsets[x + 1]):
                     f = transfer_at(t, s, ls, j, p, n, int(x != k), sides)
                     u, dist, omega = _cone_of(t, ls.sender[j], p)
-                    seen = _front_samples(n, u, omega, size)
+                    count = directions.cone_count(omega, bin_omega)
+                    seen = _front_samples(count, n, u, omega, size)
                     if f > 0.0 and seen > 0:
                         part = f / float(seen)
-                        for c in range(directions.CONE_SAMPLES):
-                            b = directions.cone_bin(c, n, u, omega, size)
+                        for c in range(count):
+                            b = directions.cone_bin(c, count, n, u, omega, size)
                             v = scratch[row + b]
                             if step == 0:
-                                v = wp.vec3(wp.min(v[0], dist), v[1] + part, 0.0)
-                            elif dist <= v[0]:
+                                v = wp.vec3(wp.min(v[0], dist), 0.0, 0.0)
+                            elif dist <= v[0] * LAYER:
+                                v = wp.vec3(v[0], v[1] + part, v[2])
+                            else:
                                 v = wp.vec3(v[0], v[1], v[2] + part)
                             scratch[row + b] = v
                 x = t.parent[x]
@@ -150,15 +156,17 @@ def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nea
             f = transfer_at(t, s, ls, j, p, n, int(x != k), sides)
             if nearest_on != 0 and f > 0.0:
                 u, dist, omega = _cone_of(t, ls.sender[j], p)
-                seen = _front_samples(n, u, omega, size)
+                count = directions.cone_count(omega, bin_omega)
+                seen = _front_samples(count, n, u, omega, size)
                 won = float(0.0)
-                for c in range(directions.CONE_SAMPLES):
-                    b = directions.cone_bin(c, n, u, omega, size)
+                for c in range(count):
+                    b = directions.cone_bin(c, count, n, u, omega, size)
                     v = scratch[row + b]
-                    if directions.front(b, size) and dist <= v[0]:
-                        # the nearest speaks for what the bin passes: what every sender in it would
-                        # bring, at most the bin's own form factor — never less than its own
-                        won += wp.min(v[1], wp.max(capacity[b], v[2])) / v[2]
+                    if directions.front(b, size):
+                        if dist <= v[0] * LAYER:
+                            won += 1.0
+                        elif v[2] > 0.0:  # behind the nearest layer: what the layer leaves of the bin
+                            won += wp.min(v[2], wp.max(capacity[b] - v[1], 0.0)) / v[2]
                 if seen > 0:
                     f *= won / float(seen)
             out.weight[i] = wp.max(f, 0.0)
@@ -192,7 +200,8 @@ def path_weights(problem, links, sides: int, bins: int = 0) -> Paths:
     scratch = wp.empty(rows * size * size, dtype=wp.vec3, device=d)
     cap = directions.capacity(bins, dev) if bins else wp.zeros(1, dtype=wp.float32, device=d)
     device_mod.launch(_path_kernel, n, [tree.nodes, problem.surfels, links.set, sides, int(bins > 0), size,
-                                        cap, rows, scratch, out], dev, chunks=-(-n // rows),
+                                        cap, directions.solid_angle(bins) if bins else 1.0, rows, scratch, out],
+                      dev, chunks=-(-n // rows),
                       on_chunk=lambda f: problem.stages.check())
     links.derived[key] = out
     return out
