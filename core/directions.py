@@ -132,8 +132,8 @@ def cell_dir(b: int, size: int, fu: float, fv: float) -> wp.vec3:
 
 # Directions per bin a cone's solid angle is sampled with where it covers many bins (``cone_count``),
 # and the most directions one cone gets.
-PER_BIN = 4
-MAX_SAMPLES = 256
+PER_BIN = 8
+MAX_SAMPLES = 4096
 # Sub-cells per side over which a bin's cosine-weighted solid angle is integrated.
 CELL_STEPS = 8
 
@@ -167,15 +167,18 @@ def cone_count(omega: float, bin_omega: float) -> int:
 @wp.func
 def subtended(p: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float) -> float:
     """Solid angle (sr) that disks of total ``area`` (m²) at q, mean unit normal nq and normal
-    ``spread`` (1 aligned, 0 an isotropic blob), subtend at p, either face: their projected area
-    over d² + A/π (which keeps it below π close up, a disk's value at its centre), at most 2π."""
+    ``spread`` (1 aligned, 0 an isotropic blob), subtend at p, either face: the cone of a disk of
+    their projected area facing p, 2π(1 − d / √(d² + A_proj/π)) — exact on a disk's axis, A_proj/d²
+    far away, 2π close up (a near surface fills the hemisphere)."""
     d = q - p
     d2 = wp.dot(d, d)
     c = float(1.0)
     if d2 > 0.0:
         c = wp.abs(wp.dot(nq, d)) / wp.sqrt(d2)
-    projected = area * (spread * c + (1.0 - spread) * 0.25)
-    return wp.min(projected / (d2 + area * 0.3183098861837907), 6.283185307179586)
+    r2 = area * (spread * c + (1.0 - spread) * 0.25) * 0.3183098861837907
+    if r2 <= 0.0:
+        return 0.0
+    return 6.283185307179586 * (1.0 - wp.sqrt(d2 / (d2 + r2)))
 
 
 @wp.func
@@ -190,18 +193,54 @@ def cone_bin(k: int, count: int, n: wp.vec3, axis: wp.vec3, omega: float, size: 
     return bin_of(local, size)
 
 
+# A receiving cone is widened to this many times its sender's solid angle: round cones leave gaps
+# between neighbouring senders that their shapes do not, and a widened cone covers the gaps (the
+# overlaps are divided out by the bins' coverage, ``antiradiance``).
+COVER = 2.0
+
+
 @wp.struct
 class Masks:
-    """The bins each directed link of a ``links.LinkSet`` spreads over, made once per link build
-    (``masks``): receive: uint16[E, CONE_SAMPLES] bins, in the receiver node's frame, of the cone
-    the sender subtends at the receiver's centre (where the light arrives from); send:
-    uint16[E, CONE_SAMPLES] bins, in the sender node's frame, of the cone the receiver subtends
-    at the sender's centre (where the light leaves to); omega: float32[E] the sender's solid angle
-    at the receiver's centre (sr)."""
+    """The bins each directed link j of a ``links.LinkSet`` spreads over, made once per link build
+    (``masks``), as lists (CSR): receive[receive_offsets[j] … receive_offsets[j+1]−1] (uint16)
+    the bins, in the receiver node's frame, of ``cone_count`` directions over the cone the sender
+    subtends at the receiver's centre (where the light arrives from), widened by COVER;
+    send[send_offsets[j] …]
+    the bins, in the sender node's frame, of the cone the receiver subtends at the sender's centre
+    (where the light leaves to); omega: float32[E] the receiving cone's solid angle (sr). Each
+    direction stands for an equal share of its cone."""
 
-    receive: wp.array2d(dtype=wp.uint16)
-    send: wp.array2d(dtype=wp.uint16)
+    receive_offsets: wp.array(dtype=wp.int32)
+    receive: wp.array(dtype=wp.uint16)
+    send_offsets: wp.array(dtype=wp.int32)
+    send: wp.array(dtype=wp.uint16)
     omega: wp.array(dtype=wp.float32)
+
+
+@wp.func
+def _link_cones(t: Nodes, x: int, b: int):
+    """(unit direction from x to b, b's solid angle at x, x's solid angle at b) between the
+    centres of nodes x and b."""
+    p = t.position[x]
+    q = t.position[b]
+    d = q - p
+    length = wp.length(d)
+    u = wp.vec3(t.normal[x])
+    if length > 0.0:
+        u = d / length
+    return u, subtended(p, q, t.normal[b], t.area[b], t.spread[b]), subtended(q, p, t.normal[x], t.area[x],
+                                                                          t.spread[x])
+
+
+@wp.kernel
+def _mask_count_kernel(offset: int, t: Nodes, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
+                       bin_omega: float, receive: wp.array(dtype=wp.int32), send: wp.array(dtype=wp.int32)):
+    """Receiver node x's links: how many directions each side's cone gets."""
+    x = wp.tid() + offset
+    for j in range(offsets[x], offsets[x + 1]):
+        u, omega_b, omega_x = _link_cones(t, x, sender[j])
+        receive[j] = cone_count(omega_b * COVER, bin_omega)
+        send[j] = cone_count(omega_x, bin_omega)
 
 
 @wp.kernel
@@ -209,35 +248,45 @@ def _masks_kernel(offset: int, t: Nodes, offsets: wp.array(dtype=wp.int32), send
                   size: int, out: Masks):
     """Receiver node x's links (one thread over its CSR range)."""
     x = wp.tid() + offset
-    p = t.position[x]
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
-        q = t.position[b]
-        d = q - p
-        length = wp.length(d)
-        u = wp.vec3(t.normal[x])
-        if length > 0.0:
-            u = d / length
-        omega_b = subtended(p, q, t.normal[b], t.area[b], t.spread[b])
-        omega_x = subtended(q, p, t.normal[x], t.area[x], t.spread[x])
+        u, omega_b, omega_x = _link_cones(t, x, b)
+        omega_b = wp.min(omega_b * COVER, 6.283185307179586)
         out.omega[j] = omega_b
-        for k in range(CONE_SAMPLES):
-            out.receive[j, k] = wp.uint16(cone_bin(k, CONE_SAMPLES, t.normal[x], u, omega_b, size))
-            out.send[j, k] = wp.uint16(cone_bin(k, CONE_SAMPLES, t.normal[b], -u, omega_x, size))
+        lo = out.receive_offsets[j]
+        count = out.receive_offsets[j + 1] - lo
+        for k in range(count):
+            out.receive[lo + k] = wp.uint16(cone_bin(k, count, t.normal[x], u, omega_b, size))
+        lo = out.send_offsets[j]
+        count = out.send_offsets[j + 1] - lo
+        for k in range(count):
+            out.send[lo + k] = wp.uint16(cone_bin(k, count, t.normal[b], -u, omega_x, size))
+
+
+def _offsets(counts: wp.array) -> wp.array:
+    """int32[E+1]: the exclusive running sum of ``counts`` (int32[E]) and the total."""
+    out = wp.zeros(counts.size + 1, dtype=wp.int32, device=counts.device)
+    wp.utils.array_scan(counts, out[1:], inclusive=True)
+    return out
 
 
 def masks(problem, links, bins: int) -> Masks:
     """The direction masks (``Masks``) of ``links`` (``links.Links`` over ``problem.tree``) for
-    ``bins`` bins, made the first time they are asked for and kept with the links (one launch)."""
+    ``bins`` bins, made the first time they are asked for and kept with the links."""
     key = ("masks", bins)
     if key not in links.derived:
         tree, dev = problem.tree, problem.device
+        d = dev.name
         count = max(links.count, 1)
+        args = [tree.nodes, links.set.offsets, links.set.sender]
+        receive = wp.zeros(count, dtype=wp.int32, device=d)
+        send = wp.zeros(count, dtype=wp.int32, device=d)
+        device_mod.launch(_mask_count_kernel, tree.count, [*args, solid_angle(bins), receive, send], dev)
         out = Masks()
-        out.receive = wp.empty((count, CONE_SAMPLES), dtype=wp.uint16, device=dev.name)
-        out.send = wp.empty((count, CONE_SAMPLES), dtype=wp.uint16, device=dev.name)
-        out.omega = wp.empty(count, dtype=wp.float32, device=dev.name)
-        device_mod.launch(_masks_kernel, tree.count, [tree.nodes, links.set.offsets, links.set.sender, side(bins), out],
-                          dev)
+        out.receive_offsets, out.send_offsets = _offsets(receive), _offsets(send)
+        out.receive = wp.empty(max(int(out.receive_offsets.numpy()[-1]), 1), dtype=wp.uint16, device=d)
+        out.send = wp.empty(max(int(out.send_offsets.numpy()[-1]), 1), dtype=wp.uint16, device=d)
+        out.omega = wp.empty(count, dtype=wp.float32, device=d)
+        device_mod.launch(_masks_kernel, tree.count, [*args, side(bins), out], dev)
         links.derived[key] = out
     return links.derived[key]

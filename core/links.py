@@ -31,8 +31,9 @@ spot hidden in a cluster (the ceiling 1 mm above the Cornell light) does not lea
 cluster's visible parts. Two leaves get the reference solver's element form factors and
 ``pair_hits``: with leaves only, links are the reference's transport. Solvers without explicit
 visibility (antiradiance, implicit visibility) ask for ``visibility=False``; antiradiance, whose
-antiradiance leaves a surface by its back, also for ``sides=2``: a pair links when one side's
-front sees either face of the other, and transfers are to both faces of the sender.
+antiradiance crosses surfaces, also for ``sides=2``: pairs whose faces see each other either way
+link (even with no transfer to either front: what arrives at a back goes on through), and
+transfers are to both faces of the sender.
 
 Finally both directions are sorted by receiver (``wp.utils.radix_sort_pairs``) into CSR
 (``LinkSet``): a gather is one thread per receiver node over a contiguous range, no atomics.
@@ -195,9 +196,8 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     centres' distance d, and its normal spread as a receiver: b's form factor from a without a's
     cosine times 2 sin(cone_a / 2) — how far a's leaves' normals may differ from its own — times
     CONE_WEIGHT. A point
-    (r = 0, area 0, cone (1, 0)) as a needs nothing itself. With ``sides`` 2 a sender may face
-    either way: dropped only when neither front sees the other node at all, and each sender's
-    cosine is bounded over both its faces."""
+    (r = 0, area 0, cone (1, 0)) as a needs nothing itself. With ``sides`` 2 either face counts
+    (antiradiance crosses surfaces both ways): the cosines are bounded over both faces."""
     v = pb - pa
     d = wp.length(v)
     gap = d - ra - rb
@@ -209,12 +209,10 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     ca = cos_bound(na, cone_a, u, beta)
     cb = cos_bound(nb, cone_b, -u, beta)
     if sides == 2:
-        ca_any = wp.max(ca, cos_bound(-na, cone_a, u, beta))
-        cb_any = wp.max(cb, cos_bound(-nb, cone_b, -u, beta))
-        if (ca <= 0.0 or cb_any <= 0.0) and (cb <= 0.0 or ca_any <= 0.0):
+        ca = wp.max(ca, cos_bound(-na, cone_a, u, beta))
+        cb = wp.max(cb, cos_bound(-nb, cone_b, -u, beta))
+        if ca <= 0.0 or cb <= 0.0:
             return wp.vec3(0.0, 0.0, 0.0)
-        ca = ca_any
-        cb = cb_any
     elif ca <= 0.0 or cb <= 0.0:
         return wp.vec3(0.0, 0.0, 0.0)
     g2 = PI * d * d
@@ -474,7 +472,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
             eb = t.element[b]
             f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
             f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
-            if f_ab > 0.0 or f_ba > 0.0:
+            if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
                 dec = LINK
                 v = float(1.0)
                 if visibility != 0 and rays > 0:
@@ -503,7 +501,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                         f_ab = sided_ff(t, s, t.position[a], t.normal[a], b, sides)
                         f_ba = sided_ff(t, s, t.position[b], t.normal[b], a, sides)
                         out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
-                    if not split and (out[0] > 0.0 or out[1] > 0.0):
+                    if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
                         dec = LINK
                 if split:
                     if leaf_a or (not leaf_b and need_b >= need_a):

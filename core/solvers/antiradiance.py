@@ -44,6 +44,7 @@ from ..directions import Masks
 from ..hierarchy import Nodes
 from ..links import LinkSet
 from .base import Solution, iterate, reconstruct_with_detail
+from .hierarchical import _exitance_kernel
 from .implicit import bins_of, links_of, path_gather, path_weights
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
@@ -52,21 +53,20 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 TABLE_WARN = 2 << 30
 
 
-@wp.kernel
-def _front_kernel(offset: int, t: Nodes, albedo: wp.array(dtype=wp.vec3), direct: wp.array(dtype=wp.vec3),
-                  indirect: wp.array(dtype=wp.vec3), size: int, table: wp.array(dtype=wp.vec3)):
-    """Leaf bin i (leaf i // bins): a front bin gets the leaf's radiance ρ ⊙ (D + I)."""
-    i = wp.tid() + offset
-    bins = size * size
-    b = i % bins
-    if directions.front(b, size):
-        e = t.element[i // bins]
-        table[i] = wp.cw_mul(albedo[e], direct[e] + indirect[e])
+@wp.func
+def shown(t: Nodes, table: wp.array(dtype=wp.vec3), exitance: wp.array(dtype=wp.vec3), node: int, b: int,
+          size: int) -> wp.vec3:
+    """The signed radiance node ``node`` shows in its bin b: its table's value (−A for a leaf),
+    plus a leaf's radiance ρ ⊙ (D + I) (``exitance``, per element) in its front bins."""
+    v = table[node * size * size + b]
+    if t.descend[node] < 0 and directions.front(b, size):
+        v += exitance[t.element[node]]
+    return v
 
 
 @wp.kernel
 def _pull_kernel(offset: int, node0: int, t: Nodes, first_leaf: wp.array(dtype=wp.int32), size: int,
-                 table: wp.array(dtype=wp.vec3)):
+                 exitance: wp.array(dtype=wp.vec3), table: wp.array(dtype=wp.vec3)):
     """Inner node bin i: the |cos|-weighted mean of what the node's leaves show in the bin's
     centre direction."""
     i = wp.tid() + offset
@@ -79,7 +79,7 @@ def _pull_kernel(offset: int, node0: int, t: Nodes, first_leaf: wp.array(dtype=w
     for leaf in range(lo, lo + int(t.leaves[x] + 0.5)):
         n = t.normal[leaf]
         weight = t.area[leaf] * wp.abs(wp.dot(n, w))
-        acc += table[leaf * bins + directions.bin_of(directions.frame_dir(n, w), size)] * weight
+        acc += shown(t, table, exitance, leaf, directions.bin_of(directions.frame_dir(n, w), size), size) * weight
         total += weight
     out = wp.vec3(0.0)
     if total > 0.0:
@@ -88,48 +88,58 @@ def _pull_kernel(offset: int, node0: int, t: Nodes, first_leaf: wp.array(dtype=w
 
 
 @wp.kernel
-def _transport_kernel(offset: int, ls: LinkSet, masks: Masks, size: int, bin_omega: float,
-                      table: wp.array(dtype=wp.vec3), sent: wp.array(dtype=wp.vec3),
-                      incoming: wp.array(dtype=wp.vec3)):
-    """U at receiver node x: each link's signed radiance (``sent``) and the incoming radiance per
-    bin at x's front (its own row of ``incoming``)."""
+def _transport_kernel(offset: int, t: Nodes, ls: LinkSet, masks: Masks, size: int, bin_omega: float,
+                      exitance: wp.array(dtype=wp.vec3), table: wp.array(dtype=wp.vec3),
+                      sent: wp.array(dtype=wp.vec3), incoming: wp.array(dtype=wp.vec3),
+                      coverage: wp.array(dtype=wp.float32)):
+    """U at receiver node x: each link's signed radiance (``sent``) and the radiance arriving per
+    bin at either face of x (its own row of ``incoming``), and the bin's net coverage (its own row
+    of ``coverage``: senders showing their fronts count +1, their backs −1 — the way out of a
+    closed object — by the share of the bin their cones cover)."""
     x = wp.tid() + offset
     bins = size * size
     row = x * bins
     for b in range(bins):
         incoming[row + b] = wp.vec3(0.0)
-    share = 1.0 / float(directions.CONE_SAMPLES)
+        coverage[row + b] = 0.0
     for j in range(ls.offsets[x], ls.offsets[x + 1]):
-        base = ls.sender[j] * bins
+        sender = ls.sender[j]
         v = wp.vec3(0.0)
-        for k in range(directions.CONE_SAMPLES):
-            v += table[base + int(masks.send[j, k])]
-        v *= share
+        lo = masks.send_offsets[j]
+        hi = masks.send_offsets[j + 1]
+        for k in range(lo, hi):
+            v += shown(t, table, exitance, sender, int(masks.send[k]), size)
+        v /= float(hi - lo)
         sent[j] = v
-        spread = v * (masks.omega[j] * share / bin_omega)
-        for k in range(directions.CONE_SAMPLES):
-            b = int(masks.receive[j, k])
-            if directions.front(b, size):
-                incoming[row + b] += spread
+        lo = masks.receive_offsets[j]
+        hi = masks.receive_offsets[j + 1]
+        share = masks.omega[j] / (float(hi - lo) * bin_omega)
+        facing = t.spread[sender] * wp.sign(wp.dot(t.normal[sender], t.position[x] - t.position[sender]))
+        for k in range(lo, hi):
+            b = row + int(masks.receive[k])
+            incoming[b] = incoming[b] + v * share
+            coverage[b] = coverage[b] + facing * share
 
 
 @wp.kernel
 def _through_kernel(offset: int, t: Nodes, size: int, incoming: wp.array(dtype=wp.vec3),
-                    table: wp.array(dtype=wp.vec3)):
-    """J at leaf bin i: a back bin gets −(the radiance arriving from the opposite direction), from
-    the incoming tables of the leaf's root path."""
+                    coverage: wp.array(dtype=wp.float32), table: wp.array(dtype=wp.vec3)):
+    """J at leaf bin i: −(the radiance arriving from the opposite direction, at either face),
+    from the incoming tables of the leaf's root path. The senders' cones, round where the nodes
+    are not, overlap each other in places: where the net coverage exceeds 1 it divides."""
     i = wp.tid() + offset
     bins = size * size
-    b = i % bins
-    if not directions.front(b, size):
-        k = i // bins
-        arrival = -directions.to_world(t.normal[k], directions.bin_dir(b, size))
-        acc = wp.vec3(0.0)
-        x = k
-        while x >= 0:
-            acc += incoming[x * bins + directions.bin_of(directions.frame_dir(t.normal[x], arrival), size)]
-            x = t.parent[x]
-        table[i] = -acc
+    k = i // bins
+    arrival = -directions.to_world(t.normal[k], directions.bin_dir(i % bins, size))
+    acc = wp.vec3(0.0)
+    covered = float(0.0)
+    x = k
+    while x >= 0:
+        b = x * bins + directions.bin_of(directions.frame_dir(t.normal[x], arrival), size)
+        acc += incoming[b]
+        covered += coverage[b]
+        x = t.parent[x]
+    table[i] = -acc / wp.max(covered, 1.0)
 
 
 def table_bytes(nodes: int, bins: int) -> int:
@@ -167,17 +177,19 @@ def solve(problem) -> Solution:
     table = wp.zeros(m * bins, dtype=wp.vec3, device=d)
     incoming = wp.zeros(m * bins, dtype=wp.vec3, device=d)
     sent = wp.zeros(max(links.count, 1), dtype=wp.vec3, device=d)
+    exitance = wp.empty(n, dtype=wp.vec3, device=d)
+    coverage = wp.empty(m * bins, dtype=wp.float32, device=d)
     first_leaf = links_mod.sampling(tree).first_leaf
     inner = m - n
     bin_omega = directions.solid_angle(bins)
 
     def sweep(direct, current, out, k):
-        device_mod.launch(_front_kernel, n * bins, [tree.nodes, problem.surfels.albedo, direct, current, size, table],
-                          dev)
-        device_mod.launch(_pull_kernel, inner * bins, [n, tree.nodes, first_leaf, size, table], dev)
-        device_mod.launch(_transport_kernel, m, [links.set, masks, size, bin_omega, table, sent, incoming], dev)
+        device_mod.launch(_exitance_kernel, n, [problem.surfels.albedo, direct, current, exitance], dev)
+        device_mod.launch(_pull_kernel, inner * bins, [n, tree.nodes, first_leaf, size, exitance, table], dev)
+        device_mod.launch(_transport_kernel, m, [tree.nodes, links.set, masks, size, bin_omega, exitance, table,
+                                                 sent, incoming, coverage], dev)
         path_gather(problem, links, paths, sent, out)
-        device_mod.launch(_through_kernel, n * bins, [tree.nodes, size, incoming, table], dev)
+        device_mod.launch(_through_kernel, n * bins, [tree.nodes, size, incoming, coverage, table], dev)
 
     changes = []
     signed, iterations, _, _ = iterate(problem, sweep, settings.bounces, changes)
