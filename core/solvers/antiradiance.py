@@ -167,7 +167,7 @@ def solve(problem) -> Solution:
     bins = bins_of(settings)
     size = directions.side(bins)
     problem.direct  # noqa: B018  (traced before the links, as the stages report it)
-    links = links_of(problem, sides=2)
+    links = links_of(problem)
     stages = problem.stages
     masks = stages.run("direction masks", directions.masks, problem, links, bins)
     paths = stages.run("direction masks", path_weights, problem, links, 2)

@@ -32,7 +32,7 @@ from ..hierarchy import Nodes, node_means
 from ..links import LinkSet
 from ..problem import Surfels
 from .base import Solution, iterate, reconstruct_with_detail
-from .hierarchical import _exitance_kernel, first_radiance, transfer_at
+from .hierarchical import _exitance_kernel, transfer_at
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -44,21 +44,20 @@ LAYER = 2.0
 SCRATCH_ROWS = 16384
 
 
-def oracle(settings, sides: int = 1) -> links_mod.Oracle:
-    """The links implicit visibility (sides 1) and antiradiance (sides 2) ask for: the settings'
-    threshold, sample pairs and budget, no visibility. Implicit visibility's, whose senders send
-    their node mean as the hierarchical solver's, are weighted by the first radiance estimate;
-    antiradiance's are geometric (its senders send what their directional tables show, which
-    already weighs each leaf by its projected area: a brightness-weighted transfer would count
-    bright leaves twice)."""
+def oracle(settings) -> links_mod.Oracle:
+    """The links implicit visibility and antiradiance share: the settings' threshold, sample pairs
+    and budget, no visibility, both faces (an occluder may show either face; antiradiance leaves
+    by the back), geometric — antiradiance's senders send what their directional tables show,
+    which already weighs each leaf by its projected area, so a brightness-weighted transfer would
+    count bright leaves twice."""
     return links_mod.Oracle(threshold=float(settings.link_threshold), rays=int(settings.visibility_rays),
                             visibility=False, seed=int(settings.seed), budget=int(settings.link_memory) << 20,
-                            brightness="first estimate" if sides == 1 else None, sides=sides)
+                            sides=2)
 
 
-def links_of(problem, sides: int = 1):
+def links_of(problem):
     """The problem's unoccluded links (built once, cached on the problem)."""
-    return problem.links(oracle(problem.settings, sides), (lambda: first_radiance(problem)) if sides == 1 else None)
+    return problem.links(oracle(problem.settings))
 
 
 def bins_of(settings) -> int:
@@ -115,8 +114,10 @@ def _front_samples(count: int, n: wp.vec3, u: wp.vec3, omega: float, size: int) 
 @wp.kernel
 def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nearest_on: int, size: int,
                  capacity: wp.array(dtype=wp.float32), bin_omega: float, rows: int, scratch: wp.array(dtype=wp.vec3), out: Paths):
-    """Leaf k: the weight of each of its path links (see the module docstring); with
-    ``nearest_on`` 0 the plain transfer at the element (antiradiance). ``scratch`` holds ``rows``
+    """Leaf k: the weight of each of its path links (see the module docstring): the transfer at
+    the element from the sender's front (``sides`` 1) or both faces (2), each link scaled to the
+    element; with ``nearest_on`` 0 that alone (antiradiance). Any link with a transfer from
+    either face competes for the bins. ``scratch`` holds ``rows``
     rows of size² bins — (nearest distance, transfer of the nearest layer, of what is behind) —
     leaf k using row k % rows (a launch wave covers at most ``rows`` leaves)."""
     k = wp.tid() + offset
@@ -132,7 +133,7 @@ def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nea
             x = k
             while x >= 0:
                 for j in range(ls.offsets[x], ls.offsets[x + 1]):
-                    f = transfer_at(t, s, ls, j, p, n, int(x != k), sides)
+                    f = transfer_at(t, s, ls, j, p, n, 1, 2)
                     u, dist, omega = _cone_of(t, ls.sender[j], p)
                     count = directions.cone_count(omega, bin_omega)
                     seen = _front_samples(count, n, u, omega, size)
@@ -153,7 +154,7 @@ def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nea
     x = k
     while x >= 0:
         for j in range(ls.offsets[x], ls.offsets[x + 1]):
-            f = transfer_at(t, s, ls, j, p, n, int(x != k), sides)
+            f = transfer_at(t, s, ls, j, p, n, 1, sides)
             if nearest_on != 0 and f > 0.0:
                 u, dist, omega = _cone_of(t, ls.sender[j], p)
                 count = directions.cone_count(omega, bin_omega)
