@@ -154,7 +154,9 @@ def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nea
     x = k
     while x >= 0:
         for j in range(ls.offsets[x], ls.offsets[x + 1]):
-            f = transfer_at(t, s, ls, j, p, n, 1, sides)
+            # a leaf's own links hold their transfer at it, from both faces: kept as they are for
+            # both faces, scaled to the front otherwise
+            f = transfer_at(t, s, ls, j, p, n, int(x != k or sides == 1), sides)
             if nearest_on != 0 and f > 0.0:
                 u, dist, omega = _cone_of(t, ls.sender[j], p)
                 count = directions.cone_count(omega, bin_omega)

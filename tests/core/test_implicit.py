@@ -84,3 +84,15 @@ def test_a_small_near_element_hides_a_far_panel_by_its_share_of_the_bin():
           f"a whole bin {whole_bin:.4f}")
     assert lost["reference"] > 0
     assert 0 < lost["implicit"] < 0.5 * whole_bin
+
+
+@pytest.mark.parametrize("scene, rmse", [("cornell_box", 0.29), ("cornell_point_lamp", 0.13)])
+def test_cornell_box_against_the_reference(scene, rmse):
+    """Lighting at the vertices against the reference at 256 bins (README has every bin count).
+    With the sample's light the hot ceiling 1 mm behind the emitter is in the emitter's layer
+    and leaks (measured 26.7 % relative RMSE, +14.0 % bias); with a point lamp in the middle
+    instead 12.0 %, −6.4 %. Bounds: the measured values, to catch regressions."""
+    import test_antiradiance
+
+    scene_fn = shapes.cornell_box if scene == "cornell_box" else test_antiradiance.cornell_point_lamp
+    assert test_antiradiance.against_reference(scene_fn, "implicit", "256")["relative_rmse"] <= rmse
