@@ -12,6 +12,10 @@ A sender seen from a receiver is not one direction but a cone: deposits spread o
 cone (its centre direction, the half angle of its solid angle) overlaps, weighted by the overlap,
 estimated with CONE_SAMPLES directions spread evenly over the cone — not by the centre direction
 alone, which aliases as bins get small (ALGORITHMS.md §6).
+
+Once per link build, ``masks`` lists for every directed link the bins its two cones cover (what
+antiradiance gathers from and deposits into); ``capacity`` gives each bin's form factor from
+its element (what implicit visibility fills a bin up to).
 """
 from __future__ import annotations
 

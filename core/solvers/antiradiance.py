@@ -1,36 +1,41 @@
 """Antiradiance (Dachsbacher, Stamminger, Drettakis, Durand 2007; ALGORITHMS.md §6, §10):
 multi-bounce indirect light with no visibility at all — light goes through every surface, and
-each surface sends what arrives at its front on through its back as antiradiance A, which
-cancels the light that should not have got through.
+each surface sends what arrives at it on through its other face as antiradiance A, in the same
+direction, which cancels the light that should not have got through.
 
 Fixed point, from A = 0: L⁽ⁱ⁺¹⁾ = E + K U(L⁽ⁱ⁾ − A⁽ⁱ⁾), A⁽ⁱ⁺¹⁾ = J U(L⁽ⁱ⁾ − A⁽ⁱ⁾), with E = ρ ⊙ D
 (D the direct lighting of ``core.direct``, already shadowed by rays, as the reference and the
 hierarchical solvers inject it), U unoccluded transport over the links (``core.links`` with
-``visibility=False, sides=2``: senders send from both faces, as antiradiance leaves by the back),
-K diffuse reflection and J pass-through. What is propagated is L − A, signed.
+``visibility=False, sides=2``: pairs linked whichever faces they show, transfers from both faces
+of the sender), K diffuse reflection and J pass-through. What is propagated is L − A, signed.
 
-Each tree node holds one directional table ``[nodes × bins]`` (vec3, ``core.directions``): a
-leaf's front bins hold its radiance L = ρ ⊙ (D + I), isotropic (diffuse), its back bins −A; an
-inner node's bin is the mean over its leaves, weighted by their projected area |cos| in the
-bin's centre direction, of what each shows that way. One iteration (a launch each):
+Each tree node holds a directional table ``[nodes × bins]`` (vec3, ``core.directions``' bins in
+the node's frame) of what it shows: a leaf's holds −A (A per bin, in its propagation direction;
+what arrived at the front leaves by the back half, what arrived at the back — a one-sided
+emitter's back lit by the ceiling 1 mm above it — by the front half) and it shows its radiance
+L = ρ ⊙ (D + I), isotropic (diffuse), in its front bins besides; an inner node's bin is the mean
+over its leaves, weighted by their projected area |cos| in the bin's centre direction, of what
+each shows that way. One iteration (a launch each):
 
-- front: the leaves' front bins ← ρ ⊙ (D + I);
 - pull: the inner nodes' tables from their leaves;
 - U (global pass, one thread per receiver node over its CSR links, no atomics): each link's
-  signed radiance is the mean of the sender's table over the bins the receiver subtends at it
-  (``directions.Masks``, box-filtered over the cone, made once per link build); it lands in the
+  signed radiance is the mean of what the sender shows over the bins of the cone the receiver
+  subtends at it (``directions.Masks``, box-filtered, made once per link build); it lands in the
   receiver's table of incoming radiance, spread over the bins of the cone the sender subtends
-  (radiance × the cone's share of each bin's solid angle);
+  there (widened by ``directions.COVER``), with the bins' net coverage;
 - K: each element's indirect lighting I is its root-path links' unoccluded transfer at the
   element (``implicit.path_weights`` without the nearest filter) × their signed radiance;
-- J (local pass): each leaf's back bin ← −(incoming radiance from the opposite direction, at its
-  front), summed over its root path (ancestors' tables read at the bin's centre direction).
+- J (local pass): each leaf bin ← −(the radiance arriving from the opposite direction), summed
+  over its root path (ancestors' tables read at the bin's centre direction) and divided by the
+  net coverage where that exceeds 1 (round cones overlap).
 
 Iterations stop when the largest change of I is below ``tolerance`` × the largest lighting value,
 at most ``bounces``; each iteration's change is kept (``counts["changes"]``). Values stay signed
 (``cache["signed"]``); the solution, which is output, is clamped at 0. The tables take
-2 × nodes × bins × 3 × 4 bytes (``counts["table_bytes"]``; a warning above TABLE_WARN), float32:
-half precision was measured to cost accuracy (README).
+nodes × bins × 28 bytes (``table_bytes``, ``counts["table_bytes"]``; a warning before the solve
+above TABLE_WARN), float32: tables rounded to half precision after every pass measured the same
+errors (README), but the incoming table accumulates every link's deposit and would accumulate in
+half; kept float32.
 """
 from __future__ import annotations
 
@@ -143,9 +148,9 @@ def _through_kernel(offset: int, t: Nodes, size: int, incoming: wp.array(dtype=w
 
 
 def table_bytes(nodes: int, bins: int) -> int:
-    """Bytes of the two directional tables (radiance and antiradiance, incoming) of ``nodes``
-    nodes at ``bins`` bins, float32 RGB."""
-    return 2 * nodes * bins * 3 * 4
+    """Bytes of the directional tables of ``nodes`` nodes at ``bins`` bins: what each shows and
+    what arrives at it (float32 RGB each) and the arrivals' coverage (float32)."""
+    return nodes * bins * (2 * 3 * 4 + 4)
 
 
 def check(problem) -> list[str]:

@@ -96,7 +96,7 @@ def test_closed_sphere_furnace_reaches_the_analytic_radiosity():
     problem.__dict__["direct"] = np.ones((problem.elements.count, 3), np.float32)
     solution = antiradiance.solve(problem)
     np.testing.assert_allclose(1.0 + 0.5 * (1.0 + solution.values), 2.0, rtol=0.02)
-    assert solution.counts["table_bytes"] == 2 * problem.tree.count * 256 * 3 * 4
+    assert solution.counts["table_bytes"] == problem.tree.count * 256 * (2 * 3 * 4 + 4)
 
 
 def cornell_point_lamp():
@@ -143,3 +143,12 @@ def test_cornell_box_lit_by_a_point_lamp_agrees_with_the_reference():
     measured 5.4 % relative RMSE, −0.7 % bias at 256 bins (the target is 5 %)."""
     figures = against_reference(cornell_point_lamp, "antiradiance", "256")
     assert figures["relative_rmse"] <= 0.06 and abs(figures["mean_bias"]) <= 0.02
+
+
+def test_large_tables_are_announced_with_their_size_and_a_smaller_bin_count(monkeypatch):
+    monkeypatch.setattr(antiradiance, "TABLE_WARN", 1)
+    problem = lit_panel(panel_over_floor([]), "antiradiance", directional_bins="1024")
+    (message,) = antiradiance.check(problem)
+    assert "1024 bins" in message and "--directional-bins 64" in message
+    monkeypatch.setattr(antiradiance, "TABLE_WARN", 2 << 30)
+    assert antiradiance.check(problem) == []
