@@ -173,16 +173,22 @@ def subtended(p: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float) -
     """Solid angle (sr) that disks of total ``area`` (m²) at q, mean unit normal nq and normal
     ``spread`` (1 aligned, 0 an isotropic blob), subtend at p, either face: the cone of a disk of
     their projected area facing p, 2π(1 − d / √(d² + A_proj/π)) — exact on a disk's axis, A_proj/d²
-    far away, 2π close up (a near surface fills the hemisphere)."""
+    far away — or, where p lies over the disk close to its plane (a ceiling 1 mm above a lamp),
+    at least what the part of the disk right under p subtends, which fills the hemisphere."""
     d = q - p
     d2 = wp.dot(d, d)
     c = float(1.0)
+    h = wp.abs(wp.dot(nq, d))
     if d2 > 0.0:
-        c = wp.abs(wp.dot(nq, d)) / wp.sqrt(d2)
+        c = h / wp.sqrt(d2)
     r2 = area * (spread * c + (1.0 - spread) * 0.25) * 0.3183098861837907
     if r2 <= 0.0:
         return 0.0
-    return 6.283185307179586 * (1.0 - wp.sqrt(d2 / (d2 + r2)))
+    omega = 6.283185307179586 * (1.0 - wp.sqrt(d2 / (d2 + r2)))
+    under = spread * area * 0.3183098861837907 - (d2 - h * h)  # radius² of the disk part under p
+    if under > 0.0:
+        omega = wp.max(omega, 6.283185307179586 * (1.0 - h / wp.sqrt(h * h + under)))
+    return omega
 
 
 @wp.func
