@@ -153,3 +153,23 @@ def test_large_tables_are_announced_with_their_size_and_a_smaller_bin_count(monk
     assert "1024 bins" in message and "--directional-bins 64" in message
     monkeypatch.setattr(antiradiance, "TABLE_WARN", 2 << 30)
     assert antiradiance.check(problem) == []
+
+
+@pytest.mark.parametrize("method", ["antiradiance", "implicit"])
+def test_lightmap_texels_come_from_the_solution_through_evaluate(tmp_path, method):
+    """Texels get the solution interpolated plus the final gather's detail (as the reference
+    solver's): finite, non-negative, and in the median what the vertices say."""
+    from radiosity_baker.core.lightmap import LightmapRequest
+    from test_hierarchical import floor_target, shadow_scene
+
+    scene = shadow_scene(4)
+    common = dict(method=method, content="indirect", device="cpu", texel_density=12.0, light_samples=4)
+    pages = {mode: bake(scene, Settings(texel_indirect=mode, **common),
+                        lightmap=LightmapRequest([floor_target(scene)], cache_dir=tmp_path)).lightmap.pages[0]
+             for mode in ("gather", "interpolate")}
+    gather, interp = pages["gather"], pages["interpolate"]
+    covered = gather.covered
+    assert np.isfinite(gather.rgb[covered]).all() and (gather.rgb[covered] >= 0).all()
+    g, i = gather.rgb[..., 0], interp.rgb[..., 0]
+    ratio = np.where(covered & (i > 0), g / np.where(i > 0, i, 1), np.nan)
+    assert abs(np.nanmedian(ratio) - 1) < 0.15
