@@ -39,6 +39,8 @@ half; kept float32.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import warp as wp
 
@@ -197,11 +199,13 @@ def solve(problem) -> Solution:
         device_mod.launch(_through_kernel, n * bins, [tree.nodes, size, incoming, coverage, table], dev)
 
     changes = []
+    t0 = time.perf_counter()
     signed, iterations, _, _ = iterate(problem, sweep, settings.bounces, changes)
+    seconds = (time.perf_counter() - t0) / max(iterations, 1)
     memory = table_bytes(m, bins)
     return Solution(np.maximum(signed, 0.0), {
         "iterations": iterations, "links": links.count, "link_threshold": links.threshold,
-        "directional_bins": bins, "table_bytes": memory, "changes": changes,
+        "directional_bins": bins, "table_bytes": memory, "changes": changes, "seconds_per_iteration": seconds,
         "negative_elements": int((signed < 0).any(axis=1).sum())}, cache={"signed": signed})
 
 

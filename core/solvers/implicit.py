@@ -31,6 +31,8 @@ neighbour and hides nothing (the hot ceiling 1 mm behind the Cornell box's light
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import warp as wp
 
@@ -271,10 +273,12 @@ def solve(problem) -> Solution:
         path_gather(problem, links, paths, sent, out)
 
     changes = []
+    t0 = time.perf_counter()
     values, iterations, _, _ = iterate(problem, sweep, settings.bounces, changes)
     return Solution(values, {"iterations": iterations, "links": links.count, "link_threshold": links.threshold,
                              "directional_bins": bins, "path_links": int(paths.offsets.numpy()[-1]),
-                             "changes": changes})
+                             "changes": changes,
+                             "seconds_per_iteration": (time.perf_counter() - t0) / max(iterations, 1)})
 
 
 def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
