@@ -156,14 +156,14 @@ def table_bytes(nodes: int, bins: int) -> int:
 
 
 def check(problem) -> list[str]:
-    """A warning before the solve when the tables would be large (the tree is about 2 nodes per
-    element)."""
+    """A warning before the solve when the tables would be large."""
     bins = bins_of(problem.settings)
-    need = table_bytes(2 * problem.elements.count, bins)
+    nodes = problem.tree.count
+    need = table_bytes(nodes, bins)
     if need < TABLE_WARN:
         return []
-    return [f"antiradiance tables of {problem.elements.count} elements at {bins} bins take about "
-            f"{need / 2**30:.1f} GiB; --directional-bins 64 takes {table_bytes(2 * problem.elements.count, 64) / 2**30:.2f} GiB"]
+    return [f"antiradiance tables of {problem.elements.count} elements ({nodes} tree nodes) at {bins} bins "
+            f"take {need / 2**30:.1f} GiB; --directional-bins 64 takes {table_bytes(nodes, 64) / 2**30:.2f} GiB"]
 
 
 def solve(problem) -> Solution:
