@@ -1,7 +1,7 @@
 """Implicit visibility and antiradiance against the reference solver, per directional bin count
 (issue #11), on scenes built in code (no bpy):
 
-    .venv/bin/python bench/antiradiance_bench.py [--bins 64 256 1024] [--half]
+    .venv/bin/python bench/antiradiance_bench.py [--bins 64 256 1024] [--half] [--blends cornell_box lamp_scene]
 
 Scenes: the Cornell box (``tests/core/shapes.cornell_box``: Cornell's geometry with the sample's
 light, a black emitter 1 mm under the ceiling), the same box lit by a point lamp in the middle
@@ -10,7 +10,10 @@ instead (no light hidden behind the emitter), and a closed room with a cube
 of the lighting (direct + indirect) at the vertices against the reference, iterations, links,
 table memory, the bake's wall time and the time per iteration (the solver's own count). ``--half`` also runs antiradiance with its tables
 rounded to half precision after every pass that writes them (what storing them as float16 would
-give). Writes bench/results/antiradiance-<machine>.json and prints a markdown table.
+give). ``--blends`` runs the sample scenes instead, opened through the bpy module (the vertices
+of the meshes that reflect, as ``tests/addon/test_reference_vs_cycles.py`` compares them; the
+errors only, per method and bin count). Writes bench/results/antiradiance-<machine>.json (or
+antiradiance-samples-<machine>.json) and prints a markdown table.
 """
 from __future__ import annotations
 
@@ -83,12 +86,43 @@ def run(scene, method: str, bins: str, reference, half: bool = False) -> dict:
     return row
 
 
+def samples(blends, bins) -> dict:
+    """Errors against the reference on the sample scenes (bpy), per method and bin count."""
+    import bpy
+
+    from radiosity_baker.addon.compare import bake_vertex_values, stack
+
+    sys.path.insert(0, str(ROOT / "tests" / "addon"))
+    from test_reference_vs_cycles import receivers
+
+    out = {}
+    for blend in blends:
+        bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / f"{blend}.blend"))
+        names = receivers(bpy.context.scene)
+        reference, result, _ = bake_vertex_values(names, Settings(method="reference"))
+        rows = []
+        for method in ("implicit", "antiradiance"):
+            for b in bins:
+                ours, res, seconds = bake_vertex_values(names, Settings(method=method, directional_bins=b))
+                rows.append({"method": method, "bins": int(b), "seconds": round(seconds, 1),
+                             "iterations": int(res.counts["iterations"]), "links": int(res.counts["links"]),
+                             **metrics.summary(stack(ours, names), stack(reference, names))})
+                print(blend, rows[-1], flush=True)
+        out[blend] = {"elements": int(result.counts["elements"]), "rows": rows}
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bins", nargs="+", default=["64", "256", "1024"])
     parser.add_argument("--scenes", nargs="+", default=list(SCENES))
     parser.add_argument("--half", action="store_true")
+    parser.add_argument("--blends", nargs="*", help="sample scenes (sample_blends/NAME.blend) through bpy")
     args = parser.parse_args()
+    if args.blends:
+        results_file.write("antiradiance-samples", {"machine": f"{platform.node()}: cpu",
+                                                    "scenes": samples(args.blends, args.bins)})
+        return
     out = {"machine": f"{platform.node()}: {device_mod.select('cpu').name}, {device_mod.select('cpu').threads} threads",
            "scenes": {}}
     for name in args.scenes:
