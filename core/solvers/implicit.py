@@ -39,6 +39,7 @@ import warp as wp
 from .. import device as device_mod
 from .. import directions
 from .. import links as links_mod
+from ..errors import BakeError
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet
 from ..problem import Surfels
@@ -50,9 +51,9 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 # Senders in a bin within this factor of the nearest one's distance are its layer: they keep
 # their links (neighbours on one surface are side by side, not behind each other).
 LAYER = 2.0
-# Elements whose nearest-sender rows (bins × 4 bytes each) are held at once while the path
-# weights are made: 16 k × 1024 bins is 64 MB.
-SCRATCH_ROWS = 16384
+# Elements whose scratch rows (bins × 12 bytes each) are held at once while the path weights are
+# made: 4 096 × 1024 bins is 48 MB.
+SCRATCH_ROWS = 4096
 
 
 def oracle(settings) -> links_mod.Oracle:
@@ -203,8 +204,6 @@ def path_weights(problem, links, sides: int, bins: int = 0) -> Paths:
     host = counts.numpy().astype(np.int64)
     offsets = np.concatenate([[0], np.cumsum(host)])
     if offsets[-1] >= 2**31:
-        from ..errors import BakeError
-
         raise BakeError(f"{offsets[-1]} path links of {n} elements exceed 2^31: raise --link-threshold")
     out = Paths()
     out.offsets = wp.array(offsets.astype(np.int32), dtype=wp.int32, device=d)
