@@ -25,7 +25,9 @@ import warp as wp
 
 from . import device as device_mod
 from .formfactor import tangent_frame
+from .gather import fan_centre
 from .hierarchy import Nodes
+from .problem import Surfels
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -228,11 +230,22 @@ class Masks:
 
 
 @wp.func
-def _link_cones(t: Nodes, x: int, b: int):
+def centre(t: Nodes, s: Surfels, x: int) -> wp.vec3:
+    """Where node x's cones start: a leaf's surface centre (the middle of its share of its
+    triangles: its element sits on a vertex, which at a mesh's rim is the surface's corner), an
+    inner node's centre."""
+    if t.descend[x] < 0:
+        e = t.element[x]
+        return fan_centre(e, s.vertex, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+    return t.position[x]
+
+
+@wp.func
+def _link_cones(t: Nodes, s: Surfels, x: int, b: int):
     """(unit direction from x to b, b's solid angle at x, x's solid angle at b) between the
-    centres of nodes x and b."""
-    p = t.position[x]
-    q = t.position[b]
+    centres (``centre``) of nodes x and b."""
+    p = centre(t, s, x)
+    q = centre(t, s, b)
     d = q - p
     length = wp.length(d)
     u = wp.vec3(t.normal[x])
@@ -243,24 +256,24 @@ def _link_cones(t: Nodes, x: int, b: int):
 
 
 @wp.kernel
-def _mask_count_kernel(offset: int, t: Nodes, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
+def _mask_count_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
                        bin_omega: float, receive: wp.array(dtype=wp.int32), send: wp.array(dtype=wp.int32)):
     """Receiver node x's links: how many directions each side's cone gets."""
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
-        u, omega_b, omega_x = _link_cones(t, x, sender[j])
+        u, omega_b, omega_x = _link_cones(t, s, x, sender[j])
         receive[j] = cone_count(omega_b * COVER, bin_omega)
         send[j] = cone_count(omega_x, bin_omega)
 
 
 @wp.kernel
-def _masks_kernel(offset: int, t: Nodes, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
+def _masks_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
                   size: int, out: Masks):
     """Receiver node x's links (one thread over its CSR range)."""
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
-        u, omega_b, omega_x = _link_cones(t, x, b)
+        u, omega_b, omega_x = _link_cones(t, s, x, b)
         omega_b = wp.min(omega_b * COVER, 6.283185307179586)
         out.omega[j] = omega_b
         lo = out.receive_offsets[j]
@@ -288,7 +301,7 @@ def masks(problem, links, bins: int) -> Masks:
         tree, dev = problem.tree, problem.device
         d = dev.name
         count = max(links.count, 1)
-        args = [tree.nodes, links.set.offsets, links.set.sender]
+        args = [tree.nodes, problem.surfels, links.set.offsets, links.set.sender]
         receive = wp.zeros(count, dtype=wp.int32, device=d)
         send = wp.zeros(count, dtype=wp.int32, device=d)
         device_mod.launch(_mask_count_kernel, tree.count, [*args, solid_angle(bins), receive, send], dev)
