@@ -30,7 +30,10 @@ sampling density (self-normalised), so what a link carries is Σ A·B·F·V over
 spot hidden in a cluster (the ceiling 1 mm above the Cornell light) does not leak through the
 cluster's visible parts. Two leaves get the reference solver's element form factors and
 ``pair_hits``: with leaves only, links are the reference's transport. Solvers without explicit
-visibility (antiradiance, implicit visibility) ask for ``visibility=False``.
+visibility (antiradiance, implicit visibility) ask for ``visibility=False``; antiradiance, whose
+antiradiance crosses surfaces, also for ``sides=2``: pairs whose faces see each other either way
+link (even with no transfer to either front: what arrives at a back goes on through), and
+transfers are to both faces of the sender.
 
 Finally both directions are sorted by receiver (``wp.utils.radix_sort_pairs``) into CSR
 (``LinkSet``): a gather is one thread per receiver node over a contiguous range, no atomics.
@@ -46,7 +49,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
@@ -57,7 +60,7 @@ from .gather import cluster_ff
 from .hierarchy import Nodes
 from .problem import Surfels
 from .rays import lift, visible
-from .solvers.reference import element_ff, fan_sample, pair_hits, point_ff
+from .solvers.reference import face_ff, fan_sample, pair_hits
 
 DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
 # Peak bytes per link (both directions): the pair and its five values while it is made, then two
@@ -99,7 +102,7 @@ class Oracle:
     carry unoccluded transfer, for implicit visibility or antiradiance). seed: of the sample
     jitter. budget: bytes the links may take. brightness: a label of the radiance estimate passed
     to ``build`` (None: none: geometric refinement, samples by area), so links made with one are
-    cached apart.
+    cached apart. sides: 1, senders send from their fronts; 2, from both faces (antiradiance).
     """
 
     threshold: float
@@ -108,6 +111,7 @@ class Oracle:
     seed: int = 1
     budget: int = 4 << 30
     brightness: str | None = None
+    sides: int = 1
 
 
 @wp.struct
@@ -144,6 +148,8 @@ class Links:
     rounds: int
     rays_traced: int
     seconds: float
+    # What solvers derive from these links once per build (direction masks), by their own keys.
+    derived: dict = field(default_factory=dict)
 
     @property
     def count(self) -> int:
@@ -179,7 +185,7 @@ def cos_bound(n: wp.vec3, cone: wp.vec2, u: wp.vec3, beta: wp.vec2) -> float:
 
 @wp.func
 def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec2, pb: wp.vec3,
-              nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec2) -> wp.vec3:
+              nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec2, sides: int) -> wp.vec3:
     """How much nodes a and b — centres p, unit normals n, bounding radii r (m), areas (m²),
     normal cones ((cos, sin) of the half-angle) — must be refined to exchange light as wholes:
     (need of a, need of b, 1 if they can exchange light at all else 0).
@@ -190,7 +196,8 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     centres' distance d, and its normal spread as a receiver: b's form factor from a without a's
     cosine times 2 sin(cone_a / 2) — how far a's leaves' normals may differ from its own — times
     CONE_WEIGHT. A point
-    (r = 0, area 0, cone (1, 0)) as a needs nothing itself."""
+    (r = 0, area 0, cone (1, 0)) as a needs nothing itself. With ``sides`` 2 either face counts
+    (antiradiance crosses surfaces both ways): the cosines are bounded over both faces."""
     v = pb - pa
     d = wp.length(v)
     gap = d - ra - rb
@@ -201,7 +208,12 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     beta = wp.vec2(wp.sqrt(1.0 - sb * sb), sb)
     ca = cos_bound(na, cone_a, u, beta)
     cb = cos_bound(nb, cone_b, -u, beta)
-    if ca <= 0.0 or cb <= 0.0:
+    if sides == 2:
+        ca = wp.max(ca, cos_bound(-na, cone_a, u, beta))
+        cb = wp.max(cb, cos_bound(-nb, cone_b, -u, beta))
+        if ca <= 0.0 or cb <= 0.0:
+            return wp.vec3(0.0, 0.0, 0.0)
+    elif ca <= 0.0 or cb <= 0.0:
         return wp.vec3(0.0, 0.0, 0.0)
     g2 = PI * d * d
     g_ab = area_b * cb / (g2 + area_b)  # b seen from a, without a's cosine
@@ -237,9 +249,33 @@ def centroid_ff(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int) -> float:
     """Unoccluded form factor from point p (unit normal n) to the front of node b: a leaf's element
     form factor (``reference.point_ff``), else the cluster form factor of b's disks gathered at
     its centre (``gather.cluster_ff``)."""
+    return face_centroid_ff(t, s, p, n, b, 1.0)
+
+
+@wp.func
+def face_centroid_ff(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int, side: float) -> float:
+    """``centroid_ff`` to one face of node b: the front for side 1, the back for side −1."""
     if t.descend[b] < 0:
-        return point_ff(s, p, n, t.element[b])
-    return cluster_ff(p, n, t.position[b], t.normal[b], t.area[b], t.spread[b], t.leaves[b])
+        return face_ff(s, p, n, t.element[b], side)
+    return cluster_ff(p, n, t.position[b], t.normal[b] * side, t.area[b], t.spread[b], t.leaves[b])
+
+
+@wp.func
+def sided_ff(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int, sides: int) -> float:
+    """``centroid_ff`` to the front of node b, plus its back when ``sides`` is 2."""
+    f = face_centroid_ff(t, s, p, n, b, 1.0)
+    if sides == 2:
+        f += face_centroid_ff(t, s, p, n, b, -1.0)
+    return f
+
+
+@wp.func
+def sided_element_ff(s: Surfels, p: wp.vec3, n: wp.vec3, e: int, sides: int) -> float:
+    """``reference.point_ff`` to the front of element e, plus its back when ``sides`` is 2."""
+    f = face_ff(s, p, n, e, 1.0)
+    if sides == 2:
+        f += face_ff(s, p, n, e, -1.0)
+    return f
 
 
 @wp.func
@@ -282,7 +318,7 @@ def element_ray(s: Surfels, i: int, j: int, u0: float, u1: float, u2: float) -> 
 
 @wp.func
 def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: int, visibility: int,
-                     seed: int):
+                     seed: int, sides: int):
     """Link (a, b) from ``rays`` sample pairs (see the module docstring): ((transfer to a, to b,
     normaliser to a, to b), (visible fraction of the transfer to a, to b, plain visible fraction
     of the rays)). The normalisers (``centroid_ff`` of the sender from the receiving samples) are
@@ -318,22 +354,22 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
         if visibility != 0:
             hit = element_ray(s, ea, eb, wp.randf(state), wp.randf(state), wp.randf(state))
         seen += hit
-        f = point_ff(s, s.pos[ea], s.nrm[ea], eb) / s.area[eb]
+        f = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides) / s.area[eb]
         w = sm.glow[lb] / (da * db)
         w_ab += w
         h_ab += w * f * hit
         u_ab += w * f
         x_ab += f * hit
-        f = point_ff(s, s.pos[eb], s.nrm[eb], ea) / s.area[ea]
+        f = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides) / s.area[ea]
         w = sm.glow[la] / (da * db)
         w_ba += w
         h_ba += w * f * hit
         u_ba += w * f
         x_ba += f * hit
         r_a += 1.0 / da
-        c_ab += centroid_ff(t, s, s.pos[ea], s.nrm[ea], b) / da
+        c_ab += sided_ff(t, s, s.pos[ea], s.nrm[ea], b, sides) / da
         r_b += 1.0 / db
-        c_ba += centroid_ff(t, s, s.pos[eb], s.nrm[eb], a) / db
+        c_ba += sided_ff(t, s, s.pos[eb], s.nrm[eb], a, sides) / db
     t_ab = x_ab / float(rays)
     if w_ab > 0.0:
         t_ab = h_ab / w_ab
@@ -409,7 +445,7 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
                    s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
                    weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
-                   seed: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
+                   seed: int, sides: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
                    link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
                    visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int64)):
     """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
@@ -434,9 +470,9 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
         elif leaf_a and leaf_b:
             ea = t.element[a]
             eb = t.element[b]
-            f_ab = element_ff(s, ea, eb)
-            f_ba = element_ff(s, eb, ea)
-            if f_ab > 0.0 or f_ba > 0.0:
+            f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
+            f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
+            if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
                 dec = LINK
                 v = float(1.0)
                 if visibility != 0 and rays > 0:
@@ -446,7 +482,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                 seen = wp.vec3(v, v, v)
         else:
             need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
-                             t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b])
+                             t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b], sides)
             if need[2] > 0.0:
                 w = float(1.0)
                 if weighted != 0:
@@ -457,15 +493,15 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                 split = largest > threshold
                 if not split:
                     if rays > 0:
-                        out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed)
+                        out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides)
                         if visibility != 0:
                             wp.atomic_add(traced, 0, wp.int64(rays))
                         split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
                     else:
-                        f_ab = centroid_ff(t, s, t.position[a], t.normal[a], b)
-                        f_ba = centroid_ff(t, s, t.position[b], t.normal[b], a)
+                        f_ab = sided_ff(t, s, t.position[a], t.normal[a], b, sides)
+                        f_ba = sided_ff(t, s, t.position[b], t.normal[b], a, sides)
                         out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
-                    if not split and (out[0] > 0.0 or out[1] > 0.0):
+                    if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
                         dec = LINK
                 if split:
                     if leaf_a or (not leaf_b and need_b >= need_a):
@@ -658,7 +694,7 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         seen = wp.empty(q, dtype=wp.vec2, device=d)
         device_mod.launch(_oracle_kernel, q,
                           [qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
-                           int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, decision,
+                           int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
                            out_count, link_count, values, seen, traced],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
         out_offset = wp.empty(q, dtype=wp.int32, device=d)
@@ -702,7 +738,8 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     traced = wp.zeros(1, dtype=wp.int64, device=d)
     # Over the budget, the threshold is raised in trial builds without rays (cheap; the links a
     # partial visibility splits need a margin), then the links are made for real.
-    trial = Oracle(threshold, rays=0, visibility=False, budget=int(oracle.budget / TRIAL_MARGIN))
+    trial = Oracle(threshold, rays=0, visibility=False, budget=int(oracle.budget / TRIAL_MARGIN),
+                   sides=oracle.sides)
     made = _create(problem, oracle, threshold, sm, weight, traced)
     while made is None:
         if threshold >= COARSEST:

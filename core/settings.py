@@ -40,6 +40,8 @@ HOOKUPS = ("none", "node", "multiply")
 LIGHTMAP_FORMATS = ("half", "float")
 TEXEL_INDIRECT = ("gather", "interpolate")
 TEXEL_SHADOWS = ("adaptive", "fixed")
+# Directional bins per element over the sphere (core/directions.py), as the panel's enum holds them.
+DIRECTIONAL_BINS = ("64", "256", "1024")
 DEVICES = ("auto", "cpu", "cuda")
 LIGHT_SELECTIONS = ("auto", "exact", "tree")
 GROUPS = ("solver", "lightmap", "output")
@@ -75,6 +77,9 @@ CHOICE_HELP = {
     "exact": "Every emitter weighed by its exact unoccluded light at every receiver (cost grows "
              "with the number of emitters)",
     "tree": "A light tree picks emitters by importance (cost grows with the log of their number)",
+    "64": "8×8 bins of 0.196 sr (coarse, least memory)",
+    "256": "16×16 bins of 0.049 sr",
+    "1024": "32×32 bins of 0.012 sr (sharpest, 4× the memory of 256)",
 }
 CHOICE_HELP["ao"] = ("Ambient occlusion: the unoccluded fraction of the hemisphere within the AO "
                      "distance, in all three channels (what Cycles' AO bake gives)")
@@ -130,7 +135,9 @@ class Settings:
                                    "receivers × emitters stay under 16 million, else the tree", "solver",
                                    choices=LIGHT_SELECTIONS)
     visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair (reference) or "
-                                   "link (hierarchical) for the visibility of indirect light",
+                                   "link (hierarchical) for the visibility of indirect light; "
+                                   "sample pairs of a link's unoccluded transfer (implicit, "
+                                   "antiradiance)",
                                    "solver", low=1, high=255,
                                    soft_high=64, flag="--rays")
     bounces: int = _option(64, "Bounces", "at most this many indirect bounces (sweeps)", "solver",
@@ -148,6 +155,10 @@ class Settings:
     link_memory: int = _option(4096, "Link Memory", "memory budget of the links (MB); a scene that "
                                "would need more gets coarser links, with a warning", "solver",
                                low=1, soft_high=65536)
+    directional_bins: str = _option("256", "Directional Bins", "direction bins over the sphere per "
+                                    "element (implicit visibility, antiradiance): more is sharper "
+                                    "and slower, and takes more memory", "solver",
+                                    choices=DIRECTIONAL_BINS)
     seed: int = _option(1, "Seed", "random seed of the sample jitter (results are deterministic "
                         "for a seed)", "solver", low=0)
     frames: str = _option("", "Frames", "frame range A:B[:STEP] to bake as an animation, each "

@@ -43,6 +43,15 @@ SOLVERS = {info.name: info for info in (
                "element clusters with ray-cast visibility (accurate, large scenes)",
                reads=("visibility_rays", "bounces", "tolerance", "link_threshold", "link_memory",
                       "texel_indirect", "texel_links")),
+    SolverInfo("implicit", "Direct light plus multi-bounce indirect light over unoccluded links "
+               "where, per receiver and direction bin, only the nearest layer of senders counts (implicit "
+               "visibility: no rays, approximate)",
+               reads=("visibility_rays", "bounces", "tolerance", "link_threshold", "link_memory",
+                      "directional_bins", "texel_indirect")),
+    SolverInfo("antiradiance", "Direct light plus multi-bounce indirect light over unoccluded links, "
+               "shadows made by antiradiance sent on through every surface (no rays)",
+               reads=("visibility_rays", "bounces", "tolerance", "link_threshold", "link_memory",
+                      "directional_bins", "texel_indirect")),
     SolverInfo("bunnell", "Direct light plus one bounce of indirect light gathered over a disk "
                "hierarchy (fast, large scenes, approximate)", reads=("texel_indirect",)),
     SolverInfo("ao", "Ambient occlusion: the unoccluded fraction of the hemisphere within the AO "

@@ -19,13 +19,14 @@ class Solution:
     cache: dict = field(default_factory=dict)
 
 
-def iterate(problem, sweep, sweeps: int) -> tuple[np.ndarray, int, wp.array, wp.array]:
+def iterate(problem, sweep, sweeps: int, changes: list | None = None) -> tuple[np.ndarray, int, wp.array, wp.array]:
     """Jacobi sweeps ``sweep(direct, current, out, k)`` (vec3[n] device arrays: the problem's
     direct lighting, the indirect lighting so far, the next; k the sweep's number from 1) until the
     largest change is below ``tolerance`` × the largest lighting value, or ``sweeps`` of them.
     Returns (float32[n,3] the last indirect lighting, sweeps made, the direct lighting and the
     last indirect lighting on the device). An animation's previous frame (``problem.previous``)
-    is the starting point: its light has mostly converged already."""
+    is the starting point: its light has mostly converged already. ``changes``, when given, gets
+    each sweep's largest change over the largest lighting value (the convergence measure)."""
     settings, stages, direct = problem.settings, problem.stages, problem.direct
     d = problem.device.name
     n = problem.elements.count
@@ -42,6 +43,8 @@ def iterate(problem, sweep, sweeps: int) -> tuple[np.ndarray, int, wp.array, wp.
         change = float(np.abs(now - before).max(initial=0.0))
         scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
         before = now
+        if changes is not None:
+            changes.append(change / scale)
         stages.report("bounces", made / settings.bounces)
         if change <= settings.tolerance * scale:
             break

@@ -33,7 +33,7 @@ import warp as wp
 from .. import device as device_mod
 from .. import links as links_mod
 from ..hierarchy import Nodes, node_means
-from ..links import LinkSet, Sampling, centroid_ff, leaf_point, sample_leaf
+from ..links import LinkSet, Sampling, leaf_point, sample_leaf, sided_ff
 from ..problem import Surfels
 from ..rays import lift, visible
 from .base import Solution, iterate, reconstruct_with_detail
@@ -108,13 +108,15 @@ def _push_kernel(offset: int, t: Nodes, gathered: wp.array(dtype=wp.vec3), out: 
 
 
 @wp.func
-def transfer_at(t: Nodes, s: Surfels, ls: LinkSet, j: int, p: wp.vec3, n: wp.vec3, scaled: int) -> float:
+def transfer_at(t: Nodes, s: Surfels, ls: LinkSet, j: int, p: wp.vec3, n: wp.vec3, scaled: int,
+                sides: int) -> float:
     """Link j's transfer at point p (unit normal n) of its receiver: as stored (the receiver's
-    average), or ``scaled`` by the sender's ``centroid_ff`` from p over the link's normaliser."""
+    average), or ``scaled`` by the sender's form factor from p (``sided_ff``: its front, or both
+    faces for ``sides`` 2 as the links were made) over the link's normaliser."""
     f = ls.transfer[j]
     norm = ls.form_factor[j]
     if scaled != 0 and norm > 0.0:
-        f = centroid_ff(t, s, p, n, ls.sender[j]) * f / norm
+        f = sided_ff(t, s, p, n, ls.sender[j], sides) * f / norm
     return f
 
 
@@ -131,7 +133,7 @@ def _above_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.a
         n = t.normal[y]
         while x >= 0:
             for j in range(ls.offsets[x], ls.offsets[x + 1]):
-                acc += radiance[ls.sender[j]] * transfer_at(t, s, ls, j, p, n, 1)
+                acc += radiance[ls.sender[j]] * transfer_at(t, s, ls, j, p, n, 1, 1)
             x = t.parent[x]
     above[y] = acc
 
@@ -148,7 +150,7 @@ def path_gather(t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.array(dtype=wp.v
     last = k
     while x >= 0 and t.leaves[x] <= limit:
         for j in range(ls.offsets[x], ls.offsets[x + 1]):
-            acc += radiance[ls.sender[j]] * transfer_at(t, s, ls, j, p, n, int(x != k))
+            acc += radiance[ls.sender[j]] * transfer_at(t, s, ls, j, p, n, int(x != k), 1)
         count += ls.offsets[x + 1] - ls.offsets[x]
         last = x
         x = t.parent[x]
@@ -312,7 +314,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                     f = point_ff(s, p, n, t.element[b]) * visible(s.mesh, origin, leaf_point(t, s, b))
                     count += 1
                 else:
-                    f = transfer_at(t, s, ls, j, p, n, 1)
+                    f = transfer_at(t, s, ls, j, p, n, 1, 1)
                     seen = int(ls.visible[j])
                     if seen > 0 and seen < 255 and f > 0.0:
                         h = float(0.0)

@@ -83,10 +83,17 @@ def element_ff(s: Surfels, i: int, j: int) -> float:
 def point_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int) -> float:
     """Form factor from point p (unit normal n) to the front of element j: its disk far away, its
     exact triangles when d² < NEAR·A_j."""
+    return face_ff(s, p, n, j, 1.0)
+
+
+@wp.func
+def face_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
+    """Form factor from point p (unit normal n) to one face of element j: the front for side 1,
+    the back for side −1 (what antiradiance leaves by); as ``point_ff``."""
     d = s.pos[j] - p
     if wp.dot(d, d) < NEAR * s.area[j]:
-        return fan_ff(p, n, j, 1.0, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-    return disk_ff(p, n, s.pos[j], s.nrm[j], s.area[j])
+        return fan_ff(p, n, j, side, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+    return disk_ff(p, n, s.pos[j], s.nrm[j] * side, s.area[j])
 
 
 @wp.func

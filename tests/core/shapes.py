@@ -119,3 +119,53 @@ def box(size: float, n: int, centre=(0.0, 0.0, 0.0), inward: bool = False):
             normal, tris = -normal, t[:, ::-1]
         out.append((q.astype(np.float32), normal.astype(np.float32), np.ascontiguousarray(tris, np.int32)))
     return out
+
+
+def quad(corners, nu: int, nv: int, towards):
+    """A planar quad (corners a, b, c, d in order) as nu×nv cells, its normal facing the point
+    ``towards``: (positions, normals, triangles) for ``scene``."""
+    a, b, c, d = (np.asarray(x, np.float64) for x in corners)
+    s, t = np.meshgrid(np.linspace(0, 1, nu + 1), np.linspace(0, 1, nv + 1), indexing="xy")
+    s, t = s.ravel()[:, None], t.ravel()[:, None]
+    pos = (1 - s) * (1 - t) * a + s * (1 - t) * b + s * t * c + (1 - s) * t * d
+    idx = np.arange((nu + 1) * (nv + 1)).reshape(nv + 1, nu + 1)
+    p0, p1, p2, p3 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    tris = np.concatenate([np.stack([p0, p1, p2], 1), np.stack([p0, p2, p3], 1)])
+    normal = np.cross(b - a, d - a)
+    normal /= np.linalg.norm(normal)
+    if normal @ (np.asarray(towards, np.float64) - pos.mean(axis=0)) < 0:
+        normal, tris = -normal, tris[:, ::-1]
+    nrm = np.tile(normal, (len(pos), 1))
+    return pos.astype(np.float32), nrm.astype(np.float32), np.ascontiguousarray(tris, np.int32)
+
+
+def cornell_box(cells: int = 8):
+    """The Cornell box (ALGORITHMS.md §8: Cornell's data in mm, y up, as metres with z up), walls
+    of cells×cells quads, the two blocks, and the light as ``sample_blends/make_samples.py`` makes
+    it: a black quad 1 mm under the ceiling emitting radiance 16 (from both faces, as Blender's
+    emissive meshes do); white 0.73, red (0.65, 0.05, 0.05), green (0.12, 0.45, 0.15)."""
+    def m(*points):
+        return [np.array([x, z, y]) / 1000.0 for x, y, z in points]
+
+    white, red, green = (0.73,) * 3, (0.65, 0.05, 0.05), (0.12, 0.45, 0.15)
+    inside = m((278, 274, 280))[0]
+    walls = [(m((552.8, 0, 0), (0, 0, 0), (0, 0, 559.2), (549.6, 0, 559.2)), white),
+             (m((556, 548.8, 0), (556, 548.8, 559.2), (0, 548.8, 559.2), (0, 548.8, 0)), white),
+             (m((549.6, 0, 559.2), (0, 0, 559.2), (0, 548.8, 559.2), (556, 548.8, 559.2)), white),
+             (m((0, 0, 559.2), (0, 0, 0), (0, 548.8, 0), (0, 548.8, 559.2)), red),
+             (m((552.8, 0, 0), (549.6, 0, 559.2), (556, 548.8, 559.2), (556, 548.8, 0)), green)]
+    parts = [(*quad(c, cells, cells, inside), albedo, (0,) * 3) for c, albedo in walls]
+    for top, height in ((((130, 165, 65), (82, 165, 225), (240, 165, 272), (290, 165, 114)), 165),
+                        (((423, 330, 247), (265, 330, 296), (314, 330, 456), (472, 330, 406)), 330)):
+        corners = m(*top)
+        centre = sum(corners) / 4 - np.array([0, 0, height / 2000.0])
+        parts.append((*quad(corners, 3, 3, centre + np.array([0, 0, 1.0])), white, (0,) * 3))
+        rows = max(2, round(height / 60))
+        for k in range(4):
+            a, b = corners[k], corners[(k + 1) % 4]
+            side = [a, b, b - np.array([0, 0, height / 1000.0]), a - np.array([0, 0, height / 1000.0])]
+            outward = (a + b) / 2 + ((a + b) / 2 - centre) * np.array([1, 1, 0])
+            parts.append((*quad(side, 3, rows, outward), white, (0,) * 3))
+    light = m((343, 547.8, 227), (343, 547.8, 332), (213, 547.8, 332), (213, 547.8, 227))
+    parts.append((*quad(light, 2, 2, inside), (0,) * 3, (16.0,) * 3))
+    return scene(parts)
