@@ -317,6 +317,14 @@ def element_ray(s: Surfels, i: int, j: int, u0: float, u1: float, u2: float) -> 
 
 
 @wp.func
+def _sample_terms(f: float, w: float, hit: float) -> wp.vec4:
+    """One sample pair's part of a direction of ``sampled_transfer``: (weight w, weighted visible
+    form factor, weighted form factor, plain visible form factor), f the form factor per sender
+    area, hit the ray's visibility."""
+    return wp.vec4(w, w * f * hit, w * f, f * hit)
+
+
+@wp.func
 def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: int, visibility: int,
                      seed: int, sides: int):
     """Link (a, b) from ``rays`` sample pairs (see the module docstring): ((transfer to a, to b,
@@ -325,14 +333,9 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
     averaged over the receiving end by area, as the transfer is."""
     state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
     shift = int(wp.randf(state) * float(rays))
-    w_ab = float(0.0)  # a receives from b: weights, weighted sum, plain sum
-    h_ab = float(0.0)
-    x_ab = float(0.0)
-    w_ba = float(0.0)
-    h_ba = float(0.0)
-    x_ba = float(0.0)
-    u_ab = float(0.0)  # weighted sums of the unoccluded samples
-    u_ba = float(0.0)
+    # per direction (a receives from b, b from a): ``_sample_terms`` summed over the samples
+    s_ab = wp.vec4(0.0)
+    s_ba = wp.vec4(0.0)
     r_a = float(0.0)  # receiving-end weights and centroid form factors
     c_ab = float(0.0)
     r_b = float(0.0)
@@ -354,30 +357,24 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
         if visibility != 0:
             hit = element_ray(s, ea, eb, wp.randf(state), wp.randf(state), wp.randf(state))
         seen += hit
-        f = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides) / s.area[eb]
-        w = sm.glow[lb] / (da * db)
-        w_ab += w
-        h_ab += w * f * hit
-        u_ab += w * f
-        x_ab += f * hit
-        f = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides) / s.area[ea]
-        w = sm.glow[la] / (da * db)
-        w_ba += w
-        h_ba += w * f * hit
-        u_ba += w * f
-        x_ba += f * hit
+        s_ab += _sample_terms(sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides) / s.area[eb],
+                              sm.glow[lb] / (da * db), hit)
+        s_ba += _sample_terms(sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides) / s.area[ea],
+                              sm.glow[la] / (da * db), hit)
         r_a += 1.0 / da
         c_ab += sided_ff(t, s, s.pos[ea], s.nrm[ea], b, sides) / da
         r_b += 1.0 / db
         c_ba += sided_ff(t, s, s.pos[eb], s.nrm[eb], a, sides) / db
-    t_ab = x_ab / float(rays)
-    if w_ab > 0.0:
-        t_ab = h_ab / w_ab
-        u_ab = u_ab / w_ab
-    t_ba = x_ba / float(rays)
-    if w_ba > 0.0:
-        t_ba = h_ba / w_ba
-        u_ba = u_ba / w_ba
+    t_ab = s_ab[3] / float(rays)
+    u_ab = s_ab[2]
+    if s_ab[0] > 0.0:
+        t_ab = s_ab[1] / s_ab[0]
+        u_ab = s_ab[2] / s_ab[0]
+    t_ba = s_ba[3] / float(rays)
+    u_ba = s_ba[2]
+    if s_ba[0] > 0.0:
+        t_ba = s_ba[1] / s_ba[0]
+        u_ba = s_ba[2] / s_ba[0]
     plain = seen / float(rays)
     return (wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
                     _normaliser(u_ba * t.area[a], c_ba / r_b)),
