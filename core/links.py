@@ -444,10 +444,11 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                    weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
                    seed: int, sides: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
                    link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
-                   visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int64)):
+                   visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int32)):
     """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
     a link, a link's (transfer to a, to b, normaliser to a, to b) and the visible fractions of
-    its transfers; rays traced are counted in ``traced``."""
+    its transfers; the rays it traced in ``traced[i]`` (Warp's CPU atomics are not atomic across
+    our threads, so no shared counter)."""
     i = wp.tid() + offset
     a = qa[i]
     b = qb[i]
@@ -455,6 +456,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
     count = int(0)
     out = wp.vec4(0.0)
     seen = wp.vec3(1.0)
+    ray_count = int(0)
     leaf_a = t.descend[a] < 0
     leaf_b = t.descend[b] < 0
     if t.area[a] > 0.0 and t.area[b] > 0.0:
@@ -474,7 +476,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                 v = float(1.0)
                 if visibility != 0 and rays > 0:
                     v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
-                    wp.atomic_add(traced, 0, wp.int64(rays))
+                    ray_count = rays
                 out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
                 seen = wp.vec3(v, v, v)
         else:
@@ -492,7 +494,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                     if rays > 0:
                         out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides)
                         if visibility != 0:
-                            wp.atomic_add(traced, 0, wp.int64(rays))
+                            ray_count = rays
                         split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
                     else:
                         f_ab = sided_ff(t, s, t.position[a], t.normal[a], b, sides)
@@ -514,6 +516,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
     link_count[i] = int(dec == LINK)
     values[i] = out
     visible_out[i] = wp.vec2(seen[0], seen[1])
+    traced[i] = ray_count
 
 
 @wp.kernel
@@ -667,10 +670,10 @@ def _canonical_root(tree) -> int:
     return _int(out, 0)
 
 
-def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, traced: wp.array):
+def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, traced: list):
     """One top-down build at ``threshold``: the unordered links (int32 a, b, vec4 values, vec2
     visible fractions: device arrays) and the rounds taken, or None when the budget was exceeded
-    on the way."""
+    on the way. ``traced[0]`` counts the rays traced."""
     tree, dev, stages = problem.tree, problem.device, problem.stages
     d = dev.name
     t = tree.nodes
@@ -689,11 +692,14 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         decision, out_count, link_count = (wp.empty(q, dtype=wp.int32, device=d) for _ in range(3))
         values = wp.empty(q, dtype=wp.vec4, device=d)
         seen = wp.empty(q, dtype=wp.vec2, device=d)
+        rays = wp.empty(q, dtype=wp.int32, device=d)
         device_mod.launch(_oracle_kernel, q,
                           [qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
                            int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
-                           out_count, link_count, values, seen, traced],
+                           out_count, link_count, values, seen, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
+        if oracle.visibility and oracle.rays > 0:
+            traced[0] += int(rays.numpy().sum(dtype=np.int64))
         out_offset = wp.empty(q, dtype=wp.int32, device=d)
         link_offset = wp.empty(q, dtype=wp.int32, device=d)
         wp.utils.array_scan(out_count, out_offset, inclusive=False)
@@ -732,7 +738,7 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     weight = None if lum is None else weights(tree, lum)
     sm = sampling(tree, lum, SAMPLE_FLOOR)
     threshold = float(oracle.threshold)
-    traced = wp.zeros(1, dtype=wp.int64, device=d)
+    traced = [0]
     # Over the budget, the threshold is raised in trial builds without rays (cheap; the links a
     # partial visibility splits need a margin), then the links are made for real.
     trial = Oracle(threshold, rays=0, visibility=False, budget=int(oracle.budget / TRIAL_MARGIN),
@@ -770,5 +776,5 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     if dev.is_cuda:
         wp.synchronize_device(d)
     return Links(set=out, pairs=pairs, threshold=threshold, rounds=rounds,
-                 rays_traced=int(traced.numpy()[0]),
+                 rays_traced=traced[0],
                  seconds=time.perf_counter() - t0)
