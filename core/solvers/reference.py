@@ -153,10 +153,12 @@ def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
 
 @wp.kernel
 def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: int,
-                  matrix: wp.array2d(dtype=wp.float32), visibility: wp.array2d(dtype=wp.uint8),
+                  visibility: wp.array2d(dtype=wp.uint8),
                   direct: wp.array(dtype=wp.vec3), indirect: wp.array(dtype=wp.vec3),
                   out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int32)):
-    """One Jacobi sweep of row i: out_i = Σ_j M_ij ρ_j (D_j + I_j); ``traced[i]`` its rays."""
+    """One Jacobi sweep of row i without the matrix held: out_i = Σ_j M_ij ρ_j (D_j + I_j), the form
+    factors computed again, the visibility kept (VISIBILITY) or traced again (TRACED); ``traced[i]``
+    its rays."""
     i = wp.tid() + offset
     acc = wp.vec3(0.0)
     count = int(0)
@@ -165,9 +167,7 @@ def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
             if j == i:
                 continue
             m = float(0.0)
-            if mode == MATRIX:
-                m = matrix[i, j]
-            elif s.area[j] > 0.0:
+            if s.area[j] > 0.0:
                 f = element_ff(s, i, j)
                 if f > 0.0:
                     if mode == VISIBILITY:
@@ -179,6 +179,26 @@ def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
                 acc += m * wp.cw_mul(s.albedo[j], direct[j] + indirect[j])
     out[i] = acc
     traced[i] = count
+
+
+@wp.kernel
+def _exitance_kernel(offset: int, albedo: wp.array(dtype=wp.vec3), direct: wp.array(dtype=wp.vec3),
+                     indirect: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    """out_j = ρ_j (D_j + I_j): what element j reflects, once per sweep."""
+    j = wp.tid() + offset
+    out[j] = wp.cw_mul(albedo[j], direct[j] + indirect[j])
+
+
+@wp.kernel
+def _matrix_sweep_kernel(offset: int, n: int, matrix: wp.array2d(dtype=wp.float32),
+                         exitance: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    """A sweep over the held matrix, row i: out_i = Σ_j M_ij B_j (the diagonal and the rows and
+    columns of elements without area are 0), a plain product with no branch per entry."""
+    i = wp.tid() + offset
+    acc = wp.vec3(0.0)
+    for j in range(n):
+        acc += matrix[i, j] * exitance[j]
+    out[i] = acc
 
 
 class Transport:
@@ -199,6 +219,7 @@ class Transport:
                             f"{free / 2**30:.2f} GiB of memory are free: lower --max-pairs")
         d = problem.device.name
         self.matrix = wp.zeros((n, n) if self.mode == MATRIX else (1, 1), dtype=wp.float32, device=d)
+        self.exitance = wp.empty(n, dtype=wp.vec3, device=d)  # ρ(D + I) of a sweep over the matrix
         self.visibility = wp.zeros((n, n) if self.mode == VISIBILITY else (1, 1), dtype=wp.uint8,
                                    device=d)
         self.traced = wp.zeros(n, dtype=wp.int32, device=d)  # rays per row (thread) of a launch
@@ -220,11 +241,17 @@ class Transport:
     def sweep(self, direct: wp.array, indirect: wp.array, out: wp.array, progress=None) -> None:
         """out ← M (ρ ⊙ (direct + indirect)) (vec3[n] device arrays)."""
         n = self.n
+        if self.mode == MATRIX:
+            device = self.problem.device
+            device_mod.launch(_exitance_kernel, n, [self.problem.surfels.albedo, direct, indirect,
+                                                    self.exitance], device)
+            device_mod.launch(_matrix_sweep_kernel, n, [n, self.matrix, self.exitance, out], device,
+                              on_chunk=progress)
+            return
         device_mod.launch(_sweep_kernel, n,
-                          [n, self.problem.surfels, self.rays, self.seed, self.mode, self.matrix,
-                           self.visibility, direct, indirect, out, self.traced],
-                          self.problem.device,
-                          chunks=1 if self.mode == MATRIX else max(1, min(16, n // 256)),
+                          [n, self.problem.surfels, self.rays, self.seed, self.mode, self.visibility,
+                           direct, indirect, out, self.traced],
+                          self.problem.device, chunks=max(1, min(16, n // 256)),
                           on_chunk=progress)
         if self.mode == TRACED:
             self._count()
