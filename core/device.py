@@ -20,8 +20,9 @@ from .errors import SettingsError
 _initialised = False
 _load_lock = threading.RLock()
 # The package's modules that hold kernels (relative to this package), loaded by load_kernels.
-KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.reference", "links", "solvers.hierarchical",
-                  "directions", "solvers.implicit", "solvers.antiradiance", "lightmap.raster")
+KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.base", "solvers.reference", "links",
+                  "solvers.hierarchical", "directions", "solvers.implicit", "solvers.antiradiance",
+                  "lightmap.raster")
 
 
 def init_warp() -> None:

@@ -50,8 +50,8 @@ from .. import links as links_mod
 from ..directions import Masks
 from ..hierarchy import Nodes
 from ..links import LinkSet
+from . import base
 from .base import Solution, iterate, reconstruct_with_detail
-from .hierarchical import _exitance_kernel
 from .implicit import bins_of, links_of, path_gather, path_weights
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
@@ -191,7 +191,7 @@ def solve(problem) -> Solution:
     bin_omega = directions.solid_angle(bins)
 
     def sweep(direct, current, out, k):
-        device_mod.launch(_exitance_kernel, n, [problem.surfels.albedo, direct, current, exitance], dev)
+        base.exitance(problem, direct, current, exitance)
         device_mod.launch(_pull_kernel, inner * bins, [n, tree.nodes, first_leaf, size, exitance, table], dev)
         device_mod.launch(_transport_kernel, m, [tree.nodes, links.set, masks, size, bin_omega, exitance, table,
                                                  sent, incoming, coverage], dev)

@@ -6,6 +6,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from .. import device as device_mod
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
 
 @dataclass
 class Solution:
@@ -17,6 +21,21 @@ class Solution:
     values: np.ndarray
     counts: dict = field(default_factory=dict)
     cache: dict = field(default_factory=dict)
+
+
+@wp.kernel
+def _exitance_kernel(offset: int, albedo: wp.array(dtype=wp.vec3), direct: wp.array(dtype=wp.vec3),
+                     indirect: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    e = wp.tid() + offset
+    out[e] = wp.cw_mul(albedo[e], direct[e] + indirect[e])
+
+
+def exitance(problem, direct: wp.array, indirect: wp.array, out: wp.array) -> wp.array:
+    """out ← ρ ⊙ (direct + indirect) (vec3[n] device arrays): what each element reflects, the
+    radiance a sweep sends."""
+    device_mod.launch(_exitance_kernel, problem.elements.count,
+                      [problem.surfels.albedo, direct, indirect, out], problem.device)
+    return out
 
 
 def iterate(problem, sweep, sweeps: int, changes: list | None = None) -> tuple[np.ndarray, int, wp.array, wp.array]:

@@ -36,7 +36,7 @@ from ..hierarchy import Nodes, node_means
 from ..links import LinkSet, Sampling, leaf_point, sample_leaf, sided_ff
 from ..problem import Surfels
 from ..rays import lift, visible
-from .base import Solution, iterate, reconstruct_with_detail
+from .base import Solution, exitance, iterate, reconstruct_with_detail
 from .reference import fan_sample, point_ff
 
 
@@ -75,13 +75,6 @@ def first_radiance(problem) -> np.ndarray:
 def links_of(problem):
     """The problem's links for this solver (built once, cached)."""
     return problem.links(oracle(problem.settings), lambda: first_radiance(problem))
-
-
-@wp.kernel
-def _exitance_kernel(offset: int, albedo: wp.array(dtype=wp.vec3), direct: wp.array(dtype=wp.vec3),
-                     indirect: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
-    e = wp.tid() + offset
-    out[e] = wp.cw_mul(albedo[e], direct[e] + indirect[e])
 
 
 @wp.kernel
@@ -186,8 +179,7 @@ class Iteration:
         """out ← push(gather(pull(ρ ⊙ (direct + indirect)))) (vec3[n] device arrays)."""
         p = self.problem
         tree, dev = p.tree, p.device
-        device_mod.launch(_exitance_kernel, p.elements.count, [p.surfels.albedo, direct, indirect, self.exitance],
-                          dev)
+        exitance(p, direct, indirect, self.exitance)
         node_means(tree, self.exitance, self.radiance)
         device_mod.launch(_gather_kernel, tree.count,
                           [self.links.set, self.radiance, self.gathered], dev)
@@ -197,8 +189,7 @@ class Iteration:
         """out ← the same step with each link evaluated at every leaf below its receiver
         (``_leaf_gather_kernel``); returns the link evaluations made."""
         p = self.problem
-        device_mod.launch(_exitance_kernel, p.elements.count, [p.surfels.albedo, direct, indirect, self.exitance],
-                          p.device)
+        exitance(p, direct, indirect, self.exitance)
         return _leaf_gather(p, self.links, self.exitance, self.radiance, out)
 
 

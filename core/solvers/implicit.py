@@ -43,8 +43,9 @@ from ..errors import BakeError
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet
 from ..problem import Surfels
+from . import base
 from .base import Solution, iterate, reconstruct_with_detail
-from .hierarchical import _exitance_kernel, transfer_at
+from .hierarchical import transfer_at
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -266,7 +267,7 @@ def solve(problem) -> Solution:
     sent = wp.empty(max(links.count, 1), dtype=wp.vec3, device=d)
 
     def sweep(direct, current, out, k):
-        device_mod.launch(_exitance_kernel, n, [problem.surfels.albedo, direct, current, exitance], dev)
+        base.exitance(problem, direct, current, exitance)
         node_means(tree, exitance, radiance)
         device_mod.launch(_sent_kernel, links.count, [links.set, radiance, sent], dev)
         path_gather(problem, links, paths, sent, out)

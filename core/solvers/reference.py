@@ -23,7 +23,7 @@ from ..errors import BakeError
 from ..formfactor import disk_ff, fan_ff
 from ..problem import Surfels
 from ..rays import lift
-from .base import Solution, iterate, reconstruct_with_detail
+from .base import Solution, exitance, iterate, reconstruct_with_detail
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -182,14 +182,6 @@ def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
 
 
 @wp.kernel
-def _exitance_kernel(offset: int, albedo: wp.array(dtype=wp.vec3), direct: wp.array(dtype=wp.vec3),
-                     indirect: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
-    """out_j = ρ_j (D_j + I_j): what element j reflects, once per sweep."""
-    j = wp.tid() + offset
-    out[j] = wp.cw_mul(albedo[j], direct[j] + indirect[j])
-
-
-@wp.kernel
 def _matrix_sweep_kernel(offset: int, n: int, matrix: wp.array2d(dtype=wp.float32),
                          exitance: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
     """A sweep over the held matrix, row i: out_i = Σ_j M_ij B_j (the diagonal and the rows and
@@ -243,8 +235,7 @@ class Transport:
         n = self.n
         if self.mode == MATRIX:
             device = self.problem.device
-            device_mod.launch(_exitance_kernel, n, [self.problem.surfels.albedo, direct, indirect,
-                                                    self.exitance], device)
+            exitance(self.problem, direct, indirect, self.exitance)
             device_mod.launch(_matrix_sweep_kernel, n, [n, self.matrix, self.exitance, out], device,
                               on_chunk=progress)
             return
