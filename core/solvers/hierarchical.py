@@ -291,10 +291,11 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                             shared = 0.0  # done with the earlier corner
                         else:
                             shared += w2
-            if shared <= 0.0:
-                last = x
-                x = t.parent[x]
-                continue
+            if shared <= 0.0:  # an earlier corner's path from here up: only its top is wanted
+                while x >= 0 and t.leaves[x] <= limit:
+                    last = x
+                    x = t.parent[x]
+                break
             for j in range(ls.offsets[x], ls.offsets[x + 1]):
                 b = ls.sender[j]
                 glow = radiance[b]
