@@ -28,6 +28,7 @@ from .formfactor import tangent_frame
 from .gather import fan_centre
 from .hierarchy import Nodes
 from .problem import Surfels
+from .solvers.reference import fan_triangle
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -78,16 +79,17 @@ def front(b: int, size: int) -> bool:
 def cone_sample(k: int, axis: wp.vec3, cos_half: float) -> wp.vec3:
     """Direction k of CONE_SAMPLES spread evenly (equal solid angle) over the cone around unit
     ``axis`` whose half angle has cosine ``cos_half``."""
-    return cone_sample_of(k, CONE_SAMPLES, axis, cos_half)
+    return cone_sample_of(k, CONE_SAMPLES, axis, cos_half, 0.0)
 
 
 @wp.func
-def cone_sample_of(k: int, count: int, axis: wp.vec3, cos_half: float) -> wp.vec3:
-    """Direction k of ``count`` spread evenly over the cone (as ``cone_sample``)."""
+def cone_sample_of(k: int, count: int, axis: wp.vec3, cos_half: float, turn: float) -> wp.vec3:
+    """Direction k of ``count`` spread evenly over the cone (as ``cone_sample``), the spiral
+    turned by ``turn`` (radians) about the axis."""
     t1, t2 = tangent_frame(axis)
     z = 1.0 - (float(k) + 0.5) / float(count) * (1.0 - cos_half)
     r = wp.sqrt(wp.max(1.0 - z * z, 0.0))
-    phi = float(k) * GOLDEN
+    phi = float(k) * GOLDEN + turn
     return axis * z + t1 * (r * wp.cos(phi)) + t2 * (r * wp.sin(phi))
 
 
@@ -171,35 +173,55 @@ def cone_count(omega: float, bin_omega: float) -> int:
 
 
 @wp.func
-def subtended(p: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float) -> float:
-    """Solid angle (sr) that disks of total ``area`` (m²) at q, mean unit normal nq and normal
-    ``spread`` (1 aligned, 0 an isotropic blob), subtend at p, either face: the cone of a disk of
-    their projected area facing p, 2π(1 − d / √(d² + A_proj/π)) — exact on a disk's axis, A_proj/d²
-    far away — or, where p lies over the disk close to its plane (a ceiling 1 mm above a lamp),
-    at least what the part of the disk right under p subtends, which fills the hemisphere."""
+def cone_to(p: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float, lean: float):
+    """(unit axis, solid angle (sr)) of the cone that disks of total ``area`` (m²) at q, mean unit
+    normal nq and normal ``spread`` (1 aligned, 0 an isotropic blob), subtend at p, either face:
+    toward q, a disk of their projected area facing p, 2π(1 − d / √(d² + A_proj/π)) — exact on a
+    disk's axis, A_proj/d² far away — or, where p lies over the disk close to its plane (a ceiling
+    1 mm above a lamp), at least ``lean`` × what the part of the disk right under p subtends,
+    which fills the hemisphere: then with the axis leaning by ``lean`` from the direction to q
+    toward the perpendicular from p to the plane (from over a disk's rim, q lies near the
+    horizon; straight across is what the part under p fills). ``lean`` ∈ [0, 1]: 1 where p's own
+    surface is parallel to the disk's, 0 where it is at right angles (then the disk's part
+    "under" p would lie beside p's surface, not over it)."""
     d = q - p
     d2 = wp.dot(d, d)
     c = float(1.0)
-    h = wp.abs(wp.dot(nq, d))
+    height = wp.dot(nq, d)
+    h = wp.abs(height)
+    u = nq
     if d2 > 0.0:
         c = h / wp.sqrt(d2)
+        u = d / wp.sqrt(d2)
     r2 = area * (spread * c + (1.0 - spread) * 0.25) * 0.3183098861837907
     if r2 <= 0.0:
-        return 0.0
+        return u, 0.0
     omega = 6.283185307179586 * (1.0 - wp.sqrt(d2 / (d2 + r2)))
     under = spread * area * 0.3183098861837907 - (d2 - h * h)  # radius² of the disk part under p
     if under > 0.0:
-        omega = wp.max(omega, 6.283185307179586 * (1.0 - h / wp.sqrt(h * h + under)))
+        below = lean * 6.283185307179586 * (1.0 - h / wp.sqrt(h * h + under))
+        if below > omega:
+            omega = below
+            if h > 0.0:
+                u = wp.normalize(u * (1.0 - lean) + nq * (wp.sign(height) * lean))
+    return u, omega
+
+
+@wp.func
+def subtended(p: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float) -> float:
+    """The solid angle (sr) of ``cone_to`` with the full part under p."""
+    u, omega = cone_to(p, q, nq, area, spread, 1.0)
     return omega
 
 
 @wp.func
-def cone_bin(k: int, count: int, n: wp.vec3, axis: wp.vec3, omega: float, size: int) -> int:
+def cone_bin(k: int, count: int, n: wp.vec3, axis: wp.vec3, omega: float, size: int, turn: float) -> int:
     """The bin, in the frame of unit normal n, of direction k of ``count`` over the cone around
-    unit ``axis`` of solid angle ``omega`` (sr): a link's deposits go 1/count to each.
+    unit ``axis`` of solid angle ``omega`` (sr, at most the hemisphere), turned by ``turn``
+    (``cone_sample_of``): a link's deposits go 1/count to each.
     Directions on the other side of the surface than the axis are mirrored back across it: a
     near node's cone, wider than the node, must not spill over the horizon."""
-    local = frame_dir(n, cone_sample_of(k, count, axis, cone_cos_half(omega)))
+    local = frame_dir(n, cone_sample_of(k, count, axis, cone_cos_half(wp.min(omega, 6.283185307179586)), turn))
     if (local[0] < 0.0) != (wp.dot(axis, n) < 0.0):
         local = wp.vec3(-local[0], local[1], local[2])
     return bin_of(local, size)
@@ -240,19 +262,139 @@ def centre(t: Nodes, s: Surfels, x: int) -> wp.vec3:
     return t.position[x]
 
 
+# A leaf closer to a node than NEAR × their radii summed has its cone toward that node made from
+# NEAR_POINTS points spread over the leaf's own surface, not from its centre: under a ceiling
+# element 1 mm above, a lamp element sees it fill the hemisphere where the two overlap and not at
+# all beyond, which the centre's single, nearly edge-on cone does not show (the light the lamp
+# sends on as antiradiance would leave sideways and leak past it).
+NEAR = 2.0
+NEAR_POINTS = 16
+# ... and when their planes are within 60° of parallel: a node at right angles (a wall over a
+# floor) fills no more of the view close up, and its centre cone measured best there.
+NEAR_PARALLEL = 0.5
+# ... and when x lies off b's plane by more than NEAR_GAP × b's radius: a node in x's own plane
+# (its neighbours on one surface) sends it nothing.
+NEAR_GAP = 1e-3
+# The R2 sequence's steps (Roberts 2018): evenly spread points of the unit square.
+R2_U, R2_V = 0.7548776662466927, 0.5698402909980532
+
+
 @wp.func
-def _link_cones(t: Nodes, s: Surfels, x: int, b: int):
-    """(unit direction from x to b, b's solid angle at x, x's solid angle at b) between the
-    centres (``centre``) of nodes x and b."""
-    p = centre(t, s, x)
+def cell_point(s: Surfels, e: int, k: int, count: int) -> wp.vec3:
+    """Point k of ``count`` spread evenly over element e's own share of its triangles (where its
+    vertex's barycentric coordinate is the largest: the shares of a mesh's elements tile it); its
+    vertex when it has no triangles."""
+    v = s.vertex[e]
+    if s.fan_offsets[e + 1] == s.fan_offsets[e]:
+        return s.points[v]
+    tri = fan_triangle(s, e, (float(k) + 0.5) / float(count))
+    u1 = wp.mod(float(k) * R2_U + 0.5, 1.0)
+    u2 = wp.mod(float(k) * R2_V + 0.5, 1.0)
+    r = wp.sqrt(u1)
+    w = wp.vec3(1.0 - r, r * (1.0 - u2), r * u2)  # a uniform point's barycentric coordinates
+    top = 0
+    if w[1] > w[top]:
+        top = 1
+    if w[2] > w[top]:
+        top = 2
+    own = 0
+    if s.tris[3 * tri + 1] == v:
+        own = 1
+    if s.tris[3 * tri + 2] == v:
+        own = 2
+    # rotate the coordinates so the largest falls on e's vertex: the third where another corner's
+    # coordinate is the largest maps onto e's third, area for area
+    q = wp.vec3(0.0)
+    for c in range(3):
+        q += s.points[s.tris[3 * tri + (c - top + own + 3) % 3]] * w[c]
+    return q
+
+
+@wp.func
+def near(t: Nodes, x: int, b: int) -> bool:
+    """Whether leaf x's cone toward node b is made from points over x's surface (``NEAR``)."""
+    if t.descend[x] >= 0 or wp.abs(wp.dot(t.normal[x], t.normal[b])) < NEAR_PARALLEL:
+        return False
+    reach = NEAR * (wp.sqrt(t.area[x] * 0.3183098861837907) + t.radius[b])
+    d = t.position[b] - t.position[x]
+    return wp.dot(d, d) < reach * reach and wp.abs(wp.dot(t.normal[b], d)) > NEAR_GAP * t.radius[b]
+
+
+@wp.func
+def point_cone(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int, widen: float):
+    """(unit direction from point p to node b's centre, b's solid angle at p × ``widen``, at most
+    2π sr) (``subtended``); n the direction used when p is the centre itself."""
     q = centre(t, s, b)
     d = q - p
     length = wp.length(d)
-    u = wp.vec3(t.normal[x])
+    u = wp.vec3(n)
     if length > 0.0:
         u = d / length
-    return u, subtended(p, q, t.normal[b], t.area[b], t.spread[b]), subtended(q, p, t.normal[x], t.area[x],
-                                                                          t.spread[x])
+    return u, wp.min(subtended(p, q, t.normal[b], t.area[b], t.spread[b]) * widen, 6.283185307179586)
+
+
+@wp.func
+def near_cone(t: Nodes, s: Surfels, x: int, k: int, b: int, widen: float):
+    """(unit axis, solid angle (sr) × ``widen``) of the cone node b subtends at leaf x's point k of
+    NEAR_POINTS (``cone_to``, leaning as far as x's and b's planes are parallel, and not where b's
+    plane lies on the other side of x's surface than b's centre: neighbours on a curved surface).
+    The solid angle is not capped at the hemisphere the directions are drawn from (``cone_bin``):
+    a cone that fills it claims more, so the bins' coverage exceeds 1 despite the sampling's
+    noise, and divides out (``antiradiance``)."""
+    p = cell_point(s, t.element[x], k, NEAR_POINTS)
+    n = t.normal[x]
+    q = centre(t, s, b)
+    d = q - p
+    if wp.length_sq(d) == 0.0:
+        return n, subtended(p, q, t.normal[b], t.area[b], t.spread[b]) * widen
+    lean = wp.abs(wp.dot(n, t.normal[b]))
+    if wp.dot(n, t.normal[b] * wp.dot(t.normal[b], d)) * wp.dot(n, d) <= 0.0:
+        lean = 0.0
+    u, omega = cone_to(p, q, t.normal[b], t.area[b], t.spread[b], lean)
+    return u, omega * widen
+
+
+@wp.func
+def cone_omega(t: Nodes, s: Surfels, x: int, b: int, widen: float) -> float:
+    """The solid angle (sr) node b subtends at node x, × ``widen`` (``point_cone``): at x's
+    centre, or for a ``near`` leaf the mean over its points."""
+    if near(t, x, b):
+        acc = float(0.0)
+        for k in range(NEAR_POINTS):
+            u, omega = near_cone(t, s, x, k, b, widen)
+            acc += omega
+        return acc / float(NEAR_POINTS)
+    u, omega = point_cone(t, s, centre(t, s, x), t.normal[x], b, widen)
+    return omega
+
+
+@wp.func
+def fill_cone(t: Nodes, s: Surfels, x: int, b: int, widen: float, size: int, out: wp.array(dtype=wp.uint16),
+              lo: int, count: int):
+    """out[lo … lo+count−1] ← the bins, in node x's frame, of ``count`` directions spread over the
+    cone(s) toward node b (``cone_omega``): for a ``near`` leaf shared among its points in
+    proportion to their cones' solid angles, so each direction stands for an equal share."""
+    total = float(0.0)
+    if near(t, x, b):
+        total = cone_omega(t, s, x, b, widen) * float(NEAR_POINTS)
+    if total > 0.0:
+        acc = float(0.0)
+        i = int(0)
+        for k in range(NEAR_POINTS):
+            u, omega = near_cone(t, s, x, k, b, widen)
+            acc += omega
+            end = count
+            if k < NEAR_POINTS - 1:
+                end = wp.min(int(acc / total * float(count) + 0.5), count)
+            for j in range(end - i):
+                # each point's spiral turned its own way: points under one disk share an axis
+                out[lo + i + j] = wp.uint16(cone_bin(j, end - i, t.normal[x], u, omega, size,
+                                                     float(k) * GOLDEN))
+            i = wp.max(i, end)
+    else:
+        u, omega = point_cone(t, s, centre(t, s, x), t.normal[x], b, widen)
+        for k in range(count):
+            out[lo + k] = wp.uint16(cone_bin(k, count, t.normal[x], u, omega, size, 0.0))
 
 
 @wp.kernel
@@ -261,9 +403,9 @@ def _mask_count_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtyp
     """Receiver node x's links: how many directions each side's cone gets."""
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
-        u, omega_b, omega_x = _link_cones(t, s, x, sender[j])
-        receive[j] = cone_count(omega_b * COVER, bin_omega)
-        send[j] = cone_count(omega_x, bin_omega)
+        b = sender[j]
+        receive[j] = cone_count(cone_omega(t, s, x, b, COVER), bin_omega)
+        send[j] = cone_count(cone_omega(t, s, b, x, 1.0), bin_omega)
 
 
 @wp.kernel
@@ -273,17 +415,11 @@ def _masks_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
-        u, omega_b, omega_x = _link_cones(t, s, x, b)
-        omega_b = wp.min(omega_b * COVER, 6.283185307179586)
-        out.omega[j] = omega_b
+        out.omega[j] = cone_omega(t, s, x, b, COVER)
         lo = out.receive_offsets[j]
-        count = out.receive_offsets[j + 1] - lo
-        for k in range(count):
-            out.receive[lo + k] = wp.uint16(cone_bin(k, count, t.normal[x], u, omega_b, size))
+        fill_cone(t, s, x, b, COVER, size, out.receive, lo, out.receive_offsets[j + 1] - lo)
         lo = out.send_offsets[j]
-        count = out.send_offsets[j + 1] - lo
-        for k in range(count):
-            out.send[lo + k] = wp.uint16(cone_bin(k, count, t.normal[b], -u, omega_x, size))
+        fill_cone(t, s, b, x, 1.0, size, out.send, lo, out.send_offsets[j + 1] - lo)
 
 
 def _offsets(counts: wp.array) -> wp.array:

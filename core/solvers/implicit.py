@@ -119,7 +119,7 @@ def _front_samples(count: int, n: wp.vec3, u: wp.vec3, omega: float, size: int) 
     """How many of a cone's ``count`` directions fall in front bins (``directions.cone_bin``)."""
     seen = int(0)
     for c in range(count):
-        if directions.front(directions.cone_bin(c, count, n, u, omega, size), size):
+        if directions.front(directions.cone_bin(c, count, n, u, omega, size, 0.0), size):
             seen += 1
     return seen
 
@@ -153,7 +153,7 @@ def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nea
                     if f > 0.0 and seen > 0:
                         part = f / float(seen)
                         for c in range(count):
-                            b = directions.cone_bin(c, count, n, u, omega, size)
+                            b = directions.cone_bin(c, count, n, u, omega, size, 0.0)
                             v = scratch[row + b]
                             if step == 0:
                                 v = wp.vec3(wp.min(v[0], dist), 0.0, 0.0)
@@ -176,7 +176,7 @@ def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nea
                 seen = _front_samples(count, n, u, omega, size)
                 won = float(0.0)
                 for c in range(count):
-                    b = directions.cone_bin(c, count, n, u, omega, size)
+                    b = directions.cone_bin(c, count, n, u, omega, size, 0.0)
                     v = scratch[row + b]
                     if directions.front(b, size):
                         if dist <= v[0] * LAYER:

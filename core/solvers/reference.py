@@ -43,10 +43,8 @@ SLOW_SECONDS = 60.0
 
 
 @wp.func
-def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
-    """A point of element j's own surface: on one of its triangles (chosen by area with u0), in the
-    half of it nearest to j's vertex. Points on the real surface, unlike the tangent disk, stay
-    inside a curved closed mesh."""
+def fan_triangle(s: Surfels, j: int, u0: float) -> int:
+    """One of element j's triangles, chosen by area with u0 ∈ [0, 1)."""
     total = float(0.0)
     for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
         total += _triangle_area2(s.points, s.tris, s.fan_triangles[k])
@@ -57,6 +55,15 @@ def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
         if pick <= 0.0:
             chosen = s.fan_triangles[k]
             break
+    return chosen
+
+
+@wp.func
+def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
+    """A point of element j's own surface: on one of its triangles (chosen by area with u0), in the
+    half of it nearest to j's vertex. Points on the real surface, unlike the tangent disk, stay
+    inside a curved closed mesh."""
+    chosen = fan_triangle(s, j, u0)
     a = s.points[s.tris[3 * chosen]]
     b = s.points[s.tris[3 * chosen + 1]]
     c = s.points[s.tris[3 * chosen + 2]]
