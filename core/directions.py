@@ -28,7 +28,7 @@ from .formfactor import tangent_frame
 from .gather import fan_centre
 from .hierarchy import Nodes
 from .problem import Surfels
-from .solvers.reference import fan_triangle
+from .solvers.reference import fan_sample, fan_triangle
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -241,14 +241,16 @@ class Masks:
     subtends at the receiver's centre (where the light arrives from), widened by COVER;
     send[send_offsets[j] …]
     the bins, in the sender node's frame, of the cone the receiver subtends at the sender's centre
-    (where the light leaves to); omega: float32[E] the receiving cone's solid angle (sr). Each
-    direction stands for an equal share of its cone."""
+    (where the light leaves to); omega: float32[E] the receiving cone's solid angle (sr); gain:
+    float32[E] what the arriving radiance counts for against the coverage it claims (``contact``;
+    1 for all but leaves in contact). Each direction stands for an equal share of its cone."""
 
     receive_offsets: wp.array(dtype=wp.int32)
     receive: wp.array(dtype=wp.uint16)
     send_offsets: wp.array(dtype=wp.int32)
     send: wp.array(dtype=wp.uint16)
     omega: wp.array(dtype=wp.float32)
+    gain: wp.array(dtype=wp.float32)
 
 
 @wp.func
@@ -354,6 +356,84 @@ def near_cone(t: Nodes, s: Surfels, x: int, k: int, b: int, widen: float):
     return u, omega * widen
 
 
+# Two leaves are in contact where one's points lie over the other's surface closer than
+# CONTACT_GAP × its size (√area): a lamp 1 mm under a ceiling of 3 cm cells.
+CONTACT_GAP = 0.1
+# Points over each leaf that decide a contact's shares.
+CONTACT_POINTS = 64
+
+
+@wp.func
+def in_cell(s: Surfels, e: int, p: wp.vec3) -> bool:
+    """Whether point p, projected onto element e's triangles, falls in e's own share of one of them
+    (where e's vertex's barycentric coordinate is the largest) within CONTACT_GAP × √area of its
+    plane."""
+    v = s.vertex[e]
+    gap = CONTACT_GAP * wp.sqrt(s.area[e])
+    for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
+        tri = s.fan_triangles[k]
+        ia = s.tris[3 * tri]
+        ib = s.tris[3 * tri + 1]
+        ic = s.tris[3 * tri + 2]
+        a = s.points[ia]
+        b = s.points[ib]
+        c = s.points[ic]
+        n = wp.cross(b - a, c - a)
+        nn = wp.dot(n, n)
+        if nn > 0.0 and wp.abs(wp.dot(p - a, n)) <= gap * wp.sqrt(nn):
+            wa = wp.dot(wp.cross(c - b, p - b), n) / nn
+            wb = wp.dot(wp.cross(a - c, p - c), n) / nn
+            wc = 1.0 - wa - wb
+            own = wa
+            if ib == v:
+                own = wb
+            if ic == v:
+                own = wc
+            if wp.min(wp.min(wa, wb), wc) >= 0.0 and own >= wp.max(wp.max(wa, wb), wc):
+                return True
+    return False
+
+
+@wp.func
+def contact(t: Nodes, s: Surfels, x: int, b: int) -> wp.vec2:
+    """Leaves x and b in contact (``CONTACT_GAP``): (the share of x under b's surface — of x's
+    points, ``cell_point`` —, the light of b that x stops per unit of b's radiance, as x's area:
+    b's area over x's × the share of the points of b's surface the reference's visibility rays aim
+    at — the half of its triangles nearest its vertex, ``fan_sample``, where its direct light was
+    found — that lie over x). x then sends on as antiradiance all of b's light those rays see
+    hidden, even where b's element reaches past x's rim (a ceiling cell hot at its vertex
+    overhanging the lamp's edge), which round cones let leak. (−1, 0) when they are not in
+    contact."""
+    if t.descend[x] >= 0 or t.descend[b] >= 0:
+        return wp.vec2(-1.0, 0.0)
+    ex = t.element[x]
+    eb = t.element[b]
+    over = float(0.0)
+    if in_cell(s, ex, s.pos[eb]):
+        over = 1.0
+    under = int(0)
+    for k in range(CONTACT_POINTS):
+        if in_cell(s, eb, cell_point(s, ex, k, CONTACT_POINTS)):
+            under += 1
+    if over == 0.0 and under == 0:
+        return wp.vec2(-1.0, 0.0)
+    return wp.vec2(float(under) / float(CONTACT_POINTS), over * t.area[b] / t.area[x])
+
+
+@wp.func
+def receive_cone(t: Nodes, s: Surfels, x: int, b: int) -> wp.vec3:
+    """(solid angle (sr) the light x receives from b claims, × COVER; its ``Masks.gain``; 1 if it
+    spreads over the whole hemisphere toward b, 0 over the cone(s) of ``fill_cone``). Leaves in
+    ``contact`` spread over the hemisphere, claiming its share under b and carrying the light x
+    stops: the shares cancel, so neither count's sampling noise reaches the radiance."""
+    if near(t, x, b):
+        c = contact(t, s, x, b)
+        if c[0] >= 0.0:
+            under = wp.max(c[0], 1.0 / float(CONTACT_POINTS))
+            return wp.vec3(COVER * 6.283185307179586 * under, c[1] / under, 1.0)
+    return wp.vec3(cone_omega(t, s, x, b, COVER), 1.0, 0.0)
+
+
 @wp.func
 def cone_omega(t: Nodes, s: Surfels, x: int, b: int, widen: float) -> float:
     """The solid angle (sr) node b subtends at node x, × ``widen`` (``point_cone``): at x's
@@ -404,7 +484,8 @@ def _mask_count_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtyp
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
-        receive[j] = cone_count(cone_omega(t, s, x, b, COVER), bin_omega)
+        cone = receive_cone(t, s, x, b)
+        receive[j] = cone_count(wp.where(cone[2] > 0.0, 6.283185307179586, cone[0]), bin_omega)
         send[j] = cone_count(cone_omega(t, s, b, x, 1.0), bin_omega)
 
 
@@ -415,9 +496,18 @@ def _masks_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
-        out.omega[j] = cone_omega(t, s, x, b, COVER)
+        cone = receive_cone(t, s, x, b)
+        out.omega[j] = cone[0]
+        out.gain[j] = cone[1]
         lo = out.receive_offsets[j]
-        fill_cone(t, s, x, b, COVER, size, out.receive, lo, out.receive_offsets[j + 1] - lo)
+        count = out.receive_offsets[j + 1] - lo
+        if cone[2] > 0.0:
+            n = t.normal[x]
+            side = wp.where(wp.dot(n, centre(t, s, b) - centre(t, s, x)) < 0.0, -1.0, 1.0)
+            for k in range(count):
+                out.receive[lo + k] = wp.uint16(cone_bin(k, count, n, n * side, 6.283185307179586, size, 0.0))
+        else:
+            fill_cone(t, s, x, b, COVER, size, out.receive, lo, count)
         lo = out.send_offsets[j]
         fill_cone(t, s, b, x, 1.0, size, out.send, lo, out.send_offsets[j + 1] - lo)
 
@@ -446,6 +536,7 @@ def masks(problem, links, bins: int) -> Masks:
         out.receive = wp.empty(max(int(out.receive_offsets.numpy()[-1]), 1), dtype=wp.uint16, device=d)
         out.send = wp.empty(max(int(out.send_offsets.numpy()[-1]), 1), dtype=wp.uint16, device=d)
         out.omega = wp.empty(count, dtype=wp.float32, device=d)
+        out.gain = wp.empty(count, dtype=wp.float32, device=d)
         device_mod.launch(_masks_kernel, tree.count, [*args, side(bins), out], dev)
         links.derived[key] = out
     return links.derived[key]

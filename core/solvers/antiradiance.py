@@ -124,7 +124,7 @@ def _transport_kernel(offset: int, t: Nodes, ls: LinkSet, masks: Masks, size: in
         facing = t.spread[sender] * wp.sign(wp.dot(t.normal[sender], t.position[x] - t.position[sender]))
         for k in range(lo, hi):
             b = row + int(masks.receive[k])
-            incoming[b] = incoming[b] + v * share
+            incoming[b] = incoming[b] + v * (share * masks.gain[j])
             coverage[b] = coverage[b] + facing * share
 
 
