@@ -395,39 +395,64 @@ def in_cell(s: Surfels, e: int, p: wp.vec3) -> bool:
 
 
 @wp.func
-def contact(t: Nodes, s: Surfels, x: int, b: int) -> wp.vec2:
+def inner_over(s: Surfels, x: int, b: int) -> int:
+    """How many of CONTACT_POINTS points of element b's surface the reference's visibility rays aim
+    at (the half of its triangles nearest its vertex, ``fan_sample``) lie over element x
+    (``in_cell``)."""
+    over = int(0)
+    for k in range(CONTACT_POINTS):
+        u0 = (float(k) + 0.5) / float(CONTACT_POINTS)
+        if in_cell(s, x, fan_sample(s, b, u0, wp.mod(float(k) * R2_U + 0.5, 1.0), wp.mod(float(k) * R2_V + 0.5, 1.0))):
+            over += 1
+    return over
+
+
+@wp.func
+def contact(t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32), x: int,
+            b: int) -> wp.vec2:
     """Leaves x and b in contact (``CONTACT_GAP``): (the share of x under b's surface — of x's
-    points, ``cell_point`` —, the light of b that x stops per unit of b's radiance, as x's area:
-    b's area over x's × the share of the points of b's surface the reference's visibility rays aim
-    at — the half of its triangles nearest its vertex, ``fan_sample``, where its direct light was
-    found — that lie over x). x then sends on as antiradiance all of b's light those rays see
-    hidden, even where b's element reaches past x's rim (a ceiling cell hot at its vertex
-    overhanging the lamp's edge), which round cones let leak. (−1, 0) when they are not in
-    contact."""
+    points, ``cell_point`` —, the light of b that x stops per unit of b's radiance, as x's area).
+    Where b's element point (where its direct light was found, and the reference's rays start)
+    lies over a leaf in contact with it, b is hidden and all its light is stopped by the leaves
+    under it, shared in proportion to how many of its surface's points lie over each
+    (``inner_over``), × b's area over x's; else none. x then sends on as antiradiance all of a
+    hidden b's light, even where b's element reaches past x's rim (a ceiling cell hot at its
+    vertex, overhanging the lamp's edge), which round cones let leak. (−1, 0) when they are not in
+    contact. b's other contacts are found among its own links (``offsets``, ``sender``: CSR)."""
     if t.descend[x] >= 0 or t.descend[b] >= 0:
         return wp.vec2(-1.0, 0.0)
     ex = t.element[x]
     eb = t.element[b]
-    over = float(0.0)
-    if in_cell(s, ex, s.pos[eb]):
-        over = 1.0
     under = int(0)
     for k in range(CONTACT_POINTS):
         if in_cell(s, eb, cell_point(s, ex, k, CONTACT_POINTS)):
             under += 1
-    if over == 0.0 and under == 0:
+    over = inner_over(s, ex, eb)
+    if over == 0 and under == 0:
         return wp.vec2(-1.0, 0.0)
-    return wp.vec2(float(under) / float(CONTACT_POINTS), over * t.area[b] / t.area[x])
+    total = int(0)
+    hidden = bool(False)
+    for i in range(offsets[b], offsets[b + 1]):
+        y = sender[i]
+        if near(t, y, b):
+            total += inner_over(s, t.element[y], eb)
+            if in_cell(s, t.element[y], s.pos[eb]):
+                hidden = True
+    power = float(0.0)
+    if hidden and total > 0:
+        power = float(over) / float(total) * t.area[b] / t.area[x]
+    return wp.vec2(float(under) / float(CONTACT_POINTS), power)
 
 
 @wp.func
-def receive_cone(t: Nodes, s: Surfels, x: int, b: int) -> wp.vec3:
+def receive_cone(t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
+                 x: int, b: int) -> wp.vec3:
     """(solid angle (sr) the light x receives from b claims, × COVER; its ``Masks.gain``; 1 if it
     spreads over the whole hemisphere toward b, 0 over the cone(s) of ``fill_cone``). Leaves in
-    ``contact`` spread over the hemisphere, claiming its share under b and carrying the light x
+    ``contact`` (the CSR links ``offsets``, ``sender``) spread over the hemisphere, claiming its share under b and carrying the light x
     stops: the shares cancel, so neither count's sampling noise reaches the radiance."""
     if near(t, x, b):
-        c = contact(t, s, x, b)
+        c = contact(t, s, offsets, sender, x, b)
         if c[0] >= 0.0:
             under = wp.max(c[0], 1.0 / float(CONTACT_POINTS))
             return wp.vec3(COVER * 6.283185307179586 * under, c[1] / under, 1.0)
@@ -484,7 +509,7 @@ def _mask_count_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtyp
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
-        cone = receive_cone(t, s, x, b)
+        cone = receive_cone(t, s, offsets, sender, x, b)
         receive[j] = cone_count(wp.where(cone[2] > 0.0, 6.283185307179586, cone[0]), bin_omega)
         send[j] = cone_count(cone_omega(t, s, b, x, 1.0), bin_omega)
 
@@ -496,7 +521,7 @@ def _masks_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
-        cone = receive_cone(t, s, x, b)
+        cone = receive_cone(t, s, offsets, sender, x, b)
         out.omega[j] = cone[0]
         out.gain[j] = cone[1]
         lo = out.receive_offsets[j]
