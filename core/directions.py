@@ -13,9 +13,20 @@ cone (its centre direction, the half angle of its solid angle) overlaps, weighte
 estimated with CONE_SAMPLES directions spread evenly over the cone — not by the centre direction
 alone, which aliases as bins get small (ALGORITHMS.md §6).
 
+Close up a cone from a node's centre says little: a lamp element 1 mm under a ceiling element
+sees it fill its hemisphere where the two overlap and nowhere else. A leaf near a node and nearly
+parallel to it (``near``) has its cone made from points spread over its own surface
+(``cell_point``), each point's around the perpendicular to the node's plane where it lies under
+the node. Two leaves in contact (``contact``: one's points over the other's surface within a
+tenth of its size) exchange what the reference solver's rays would let through: the leaves under
+a hidden element (its element point over them) stop all its light, shared by how many of its
+surface's points lie over each — so a ceiling cell lit hot at its vertex by the lamp's back and
+reaching past the lamp's rim does not leak around it.
+
 Once per link build, ``masks`` lists for every directed link the bins its two cones cover (what
-antiradiance gathers from and deposits into); ``capacity`` gives each bin's form factor from
-its element (what implicit visibility fills a bin up to).
+antiradiance gathers from and deposits into) and what its arrivals count for (``Masks.gain``);
+``capacity`` gives each bin's form factor from its element (what implicit visibility fills a bin
+up to).
 """
 from __future__ import annotations
 
@@ -314,7 +325,9 @@ def cell_point(s: Surfels, e: int, k: int, count: int) -> wp.vec3:
 
 @wp.func
 def near(t: Nodes, x: int, b: int) -> bool:
-    """Whether leaf x's cone toward node b is made from points over x's surface (``NEAR``)."""
+    """Whether leaf x's cone toward node b is made from points over x's surface: b within NEAR ×
+    their radii, its plane within 60° of parallel to x's (NEAR_PARALLEL) and x off it
+    (NEAR_GAP)."""
     if t.descend[x] >= 0 or wp.abs(wp.dot(t.normal[x], t.normal[b])) < NEAR_PARALLEL:
         return False
     reach = NEAR * (wp.sqrt(t.area[x] * 0.3183098861837907) + t.radius[b])
@@ -350,8 +363,8 @@ def near_cone(t: Nodes, s: Surfels, x: int, k: int, b: int, widen: float):
     if wp.length_sq(d) == 0.0:
         return n, subtended(p, q, t.normal[b], t.area[b], t.spread[b]) * widen
     lean = wp.abs(wp.dot(n, t.normal[b]))
-    if wp.dot(n, t.normal[b] * wp.dot(t.normal[b], d)) * wp.dot(n, d) <= 0.0:
-        lean = 0.0
+    if wp.dot(n, t.normal[b]) * wp.dot(t.normal[b], d) * wp.dot(n, d) <= 0.0:
+        lean = 0.0  # the way to b's plane and to b's centre lie on either side of x's surface
     u, omega = cone_to(p, q, t.normal[b], t.area[b], t.spread[b], lean)
     return u, omega * widen
 
@@ -449,8 +462,9 @@ def receive_cone(t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender
                  x: int, b: int) -> wp.vec3:
     """(solid angle (sr) the light x receives from b claims, × COVER; its ``Masks.gain``; 1 if it
     spreads over the whole hemisphere toward b, 0 over the cone(s) of ``fill_cone``). Leaves in
-    ``contact`` (the CSR links ``offsets``, ``sender``) spread over the hemisphere, claiming its share under b and carrying the light x
-    stops: the shares cancel, so neither count's sampling noise reaches the radiance."""
+    ``contact`` (b's other contacts found through the CSR links ``offsets``, ``sender``) spread
+    over the hemisphere, claiming its share under b and carrying the light x stops: the shares
+    cancel, so neither count's sampling noise reaches the radiance."""
     if near(t, x, b):
         c = contact(t, s, offsets, sender, x, b)
         if c[0] >= 0.0:

@@ -22,7 +22,9 @@ each shows that way. One iteration (a launch each):
   signed radiance is the mean of what the sender shows over the bins of the cone the receiver
   subtends at it (``directions.Masks``, box-filtered, made once per link build); it lands in the
   receiver's table of incoming radiance, spread over the bins of the cone the sender subtends
-  there (widened by ``directions.COVER``), with the bins' net coverage;
+  there (widened by ``directions.COVER``; near and in contact, see ``directions``), with the
+  bins' net coverage (the radiance × the link's ``gain``: leaves in contact carry all the light
+  the one stops of the other's);
 - K: each element's indirect lighting I is its root-path links' unoccluded transfer at the
   element (``implicit.path_weights`` without the nearest filter) × their signed radiance;
 - J (local pass): each leaf bin ← −(the radiance arriving from the opposite direction), summed
