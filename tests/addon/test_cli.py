@@ -182,11 +182,12 @@ def _baked(out: Path, maps: Path, attribute: str):
 
 
 @pytest.mark.parametrize("method, content", [("hierarchical", "lighting"), ("bunnell", "lighting"),
+                                             ("implicit", "lighting"), ("antiradiance", "lighting"),
                                              ("direct", "ao")])
 def test_light_methods_and_ao_bake_into_color_attributes_and_lightmaps(tmp_path, method, content):
-    """On the lamp scene: hierarchical radiosity's and Bunnell's indirect light adds to the same
-    direct light (same seed) in both targets; AO lies in [0, 1], with occlusion where objects
-    stand on the floor."""
+    """On the lamp scene: hierarchical radiosity's, Bunnell's, implicit visibility's and
+    antiradiance's indirect light adds to the same direct light (same seed) in both targets; AO
+    lies in [0, 1], with occlusion where objects stand on the floor."""
     def run(name, m):
         out, maps = tmp_path / f"{name}.blend", tmp_path / name
         assert cli.main(["bake", str(LAMP_SCENE), "--method", m, "--content", content, "--samples", "4",
