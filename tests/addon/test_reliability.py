@@ -448,10 +448,13 @@ def test_ctrl_c_is_one_line_and_status_130(blend, tmp_path, capsys, bake_raises)
 
 
 def test_ctrl_c_of_a_real_process(tmp_path):
+    # 4096 light samples keep the direct stage busy for seconds after its first line, so the
+    # signal lands in the bake even when this process reads the line late (at 64 the rest of the
+    # bake took 1 s and a loaded test run once sent it after the bake had finished)
     env = {k: v for k, v in os.environ.items() if k != "BLENDER_USER_RESOURCES"}
     out = tmp_path / "out.blend"
     proc = subprocess.Popen([sys.executable, "-m", "radiosity_baker", "bake", str(CORNELL),
-                             "--samples", "64", "--save", str(out)],
+                             "--samples", "4096", "--save", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     for line in proc.stdout:
         if line.startswith("radiosity_baker: direct"):
