@@ -488,14 +488,15 @@ def cone_omega(t: Nodes, s: Surfels, x: int, b: int, widen: float) -> float:
 
 
 @wp.func
-def fill_cone(t: Nodes, s: Surfels, x: int, b: int, widen: float, size: int, out: wp.array(dtype=wp.uint16),
-              lo: int, count: int):
+def fill_cone(t: Nodes, s: Surfels, x: int, b: int, widen: float, omega_x: float, size: int,
+              out: wp.array(dtype=wp.uint16), lo: int, count: int):
     """out[lo … lo+count−1] ← the bins, in node x's frame, of ``count`` directions spread over the
-    cone(s) toward node b (``cone_omega``): for a ``near`` leaf shared among its points in
-    proportion to their cones' solid angles, so each direction stands for an equal share."""
+    cone(s) toward node b, whose solid angle ``cone_omega`` gave as ``omega_x``: for a ``near``
+    leaf shared among its points in proportion to their cones' solid angles, so each direction
+    stands for an equal share."""
     total = float(0.0)
     if near(t, x, b):
-        total = cone_omega(t, s, x, b, widen) * float(NEAR_POINTS)
+        total = omega_x * float(NEAR_POINTS)
     if total > 0.0:
         acc = float(0.0)
         i = int(0)
@@ -518,37 +519,41 @@ def fill_cone(t: Nodes, s: Surfels, x: int, b: int, widen: float, size: int, out
 
 @wp.kernel
 def _mask_count_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
-                       bin_omega: float, receive: wp.array(dtype=wp.int32), send: wp.array(dtype=wp.int32)):
-    """Receiver node x's links: how many directions each side's cone gets."""
+                       bin_omega: float, receive: wp.array(dtype=wp.int32), send: wp.array(dtype=wp.int32),
+                       omega: wp.array(dtype=wp.float32), gain: wp.array(dtype=wp.float32),
+                       whole: wp.array(dtype=wp.uint8), send_omega: wp.array(dtype=wp.float32)):
+    """Receiver node x's links: how many directions each side's cone gets, and what the masks
+    kernel spreads them by (``receive_cone``; the sending cone's ``cone_omega``)."""
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
         cone = receive_cone(t, s, offsets, sender, x, b)
+        omega[j] = cone[0]
+        gain[j] = cone[1]
+        whole[j] = wp.uint8(cone[2])
         receive[j] = cone_count(wp.where(cone[2] > 0.0, 6.283185307179586, cone[0]), bin_omega)
-        send[j] = cone_count(cone_omega(t, s, b, x, 1.0), bin_omega)
+        send_omega[j] = cone_omega(t, s, b, x, 1.0)
+        send[j] = cone_count(send_omega[j], bin_omega)
 
 
 @wp.kernel
 def _masks_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32),
-                  size: int, out: Masks):
-    """Receiver node x's links (one thread over its CSR range)."""
+                  size: int, whole: wp.array(dtype=wp.uint8), send_omega: wp.array(dtype=wp.float32), out: Masks):
+    """Receiver node x's links (one thread over its CSR range): their bins."""
     x = wp.tid() + offset
     for j in range(offsets[x], offsets[x + 1]):
         b = sender[j]
-        cone = receive_cone(t, s, offsets, sender, x, b)
-        out.omega[j] = cone[0]
-        out.gain[j] = cone[1]
         lo = out.receive_offsets[j]
         count = out.receive_offsets[j + 1] - lo
-        if cone[2] > 0.0:
+        if whole[j] > wp.uint8(0):
             n = t.normal[x]
             side = wp.where(wp.dot(n, centre(t, s, b) - centre(t, s, x)) < 0.0, -1.0, 1.0)
             for k in range(count):
                 out.receive[lo + k] = wp.uint16(cone_bin(k, count, n, n * side, 6.283185307179586, size, 0.0))
         else:
-            fill_cone(t, s, x, b, COVER, size, out.receive, lo, count)
+            fill_cone(t, s, x, b, COVER, out.omega[j], size, out.receive, lo, count)
         lo = out.send_offsets[j]
-        fill_cone(t, s, b, x, 1.0, size, out.send, lo, out.send_offsets[j + 1] - lo)
+        fill_cone(t, s, b, x, 1.0, send_omega[j], size, out.send, lo, out.send_offsets[j + 1] - lo)
 
 
 def _offsets(counts: wp.array) -> wp.array:
@@ -569,13 +574,17 @@ def masks(problem, links, bins: int) -> Masks:
         args = [tree.nodes, problem.surfels, links.set.offsets, links.set.sender]
         receive = wp.zeros(count, dtype=wp.int32, device=d)
         send = wp.zeros(count, dtype=wp.int32, device=d)
-        device_mod.launch(_mask_count_kernel, tree.count, [*args, solid_angle(bins), receive, send], dev)
         out = Masks()
+        out.omega = wp.zeros(count, dtype=wp.float32, device=d)
+        out.gain = wp.zeros(count, dtype=wp.float32, device=d)
+        # made by the counting pass for the filling pass (contacts are costly to find)
+        whole = wp.zeros(count, dtype=wp.uint8, device=d)
+        send_omega = wp.zeros(count, dtype=wp.float32, device=d)
+        device_mod.launch(_mask_count_kernel, tree.count,
+                          [*args, solid_angle(bins), receive, send, out.omega, out.gain, whole, send_omega], dev)
         out.receive_offsets, out.send_offsets = _offsets(receive), _offsets(send)
         out.receive = wp.empty(max(int(out.receive_offsets.numpy()[-1]), 1), dtype=wp.uint16, device=d)
         out.send = wp.empty(max(int(out.send_offsets.numpy()[-1]), 1), dtype=wp.uint16, device=d)
-        out.omega = wp.empty(count, dtype=wp.float32, device=d)
-        out.gain = wp.empty(count, dtype=wp.float32, device=d)
-        device_mod.launch(_masks_kernel, tree.count, [*args, side(bins), out], dev)
+        device_mod.launch(_masks_kernel, tree.count, [*args, side(bins), whole, send_omega, out], dev)
         links.derived[key] = out
     return links.derived[key]
