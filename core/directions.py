@@ -421,6 +421,13 @@ def inner_over(s: Surfels, x: int, b: int) -> int:
 
 
 @wp.func
+def covers(t: Nodes, s: Surfels, y: int, b: int) -> bool:
+    """Whether leaf b's element point (where its direct light was found, and the reference's rays
+    start) lies over leaf y's surface, y ``near`` b (``in_cell``)."""
+    return near(t, y, b) and in_cell(s, t.element[y], s.pos[t.element[b]])
+
+
+@wp.func
 def contact(t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.array(dtype=wp.int32), x: int,
             b: int) -> wp.vec2:
     """Leaves x and b in contact (``CONTACT_GAP``): (the share of x under b's surface — of x's
@@ -449,7 +456,7 @@ def contact(t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.
         y = sender[i]
         if near(t, y, b):
             total += inner_over(s, t.element[y], eb)
-            if in_cell(s, t.element[y], s.pos[eb]):
+            if covers(t, s, y, b):
                 hidden = True
     power = float(0.0)
     if hidden and total > 0:
@@ -556,6 +563,20 @@ def _masks_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.
         fill_cone(t, s, b, x, 1.0, send_omega[j], size, out.send, lo, out.send_offsets[j + 1] - lo)
 
 
+@wp.kernel
+def _hidden_kernel(offset: int, t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32),
+                   sender: wp.array(dtype=wp.int32), visible: wp.array(dtype=wp.float32)):
+    """Leaf x (the tree's first n nodes): 0 in ``visible`` where x is hidden, its element point
+    over a leaf linked with it that lies before its face (``covers``)."""
+    x = wp.tid() + offset
+    e = t.element[x]
+    visible[e] = 1.0
+    for j in range(offsets[x], offsets[x + 1]):
+        y = sender[j]
+        if wp.dot(t.normal[x], t.position[y] - s.pos[e]) > 0.0 and covers(t, s, y, x):
+            visible[e] = 0.0
+
+
 def _offsets(counts: wp.array) -> wp.array:
     """int32[E+1]: the exclusive running sum of ``counts`` (int32[E]) and the total."""
     out = wp.zeros(counts.size + 1, dtype=wp.int32, device=counts.device)
@@ -588,3 +609,32 @@ def masks(problem, links, bins: int) -> Masks:
         device_mod.launch(_masks_kernel, tree.count, [*args, side(bins), whole, send_omega, out], dev)
         links.derived[key] = out
     return links.derived[key]
+
+
+def visible(problem, links) -> wp.array:
+    """float32[n] per element: 0 where it is hidden — its element point over the surface of a
+    leaf linked with it and before its face, in contact (``covers``): a ceiling cell 1 mm above
+    a lamp — else 1, made the first time it is asked for and kept with ``links``. A hidden
+    element shows none of its radiance: what the reference's rays from its point would find is
+    the surface over it, and cancelling its light by antiradiance from a surface 1 mm away leaks
+    round that surface's rim wherever the cones are round."""
+    if "visible" not in links.derived:
+        tree = problem.tree
+        out = wp.empty(problem.elements.count, dtype=wp.float32, device=problem.device.name)
+        device_mod.launch(_hidden_kernel, problem.elements.count,
+                          [tree.nodes, problem.surfels, links.set.offsets, links.set.sender, out], problem.device)
+        links.derived["visible"] = out
+    return links.derived["visible"]
+
+
+@wp.kernel
+def _hide_kernel(offset: int, visible: wp.array(dtype=wp.float32), exitance: wp.array(dtype=wp.vec3)):
+    e = wp.tid() + offset
+    exitance[e] = exitance[e] * visible[e]
+
+
+def hide(problem, links, exitance: wp.array) -> wp.array:
+    """exitance (vec3[n], what each element reflects) ← 0 where the element is hidden
+    (``visible``)."""
+    device_mod.launch(_hide_kernel, problem.elements.count, [visible(problem, links), exitance], problem.device)
+    return exitance

@@ -180,6 +180,7 @@ def solve(problem) -> Solution:
     stages = problem.stages
     masks = stages.run("direction masks", directions.masks, problem, links, bins)
     paths = stages.run("direction masks", path_weights, problem, links, 2)
+    stages.run("direction masks", directions.visible, problem, links)
     tree, dev = problem.tree, problem.device
     d = dev.name
     n, m = problem.elements.count, tree.count
@@ -194,6 +195,7 @@ def solve(problem) -> Solution:
 
     def sweep(direct, current, out, k):
         base.exitance(problem, direct, current, exitance)
+        directions.hide(problem, links, exitance)
         device_mod.launch(_pull_kernel, inner * bins, [n, tree.nodes, first_leaf, size, exitance, table], dev)
         device_mod.launch(_transport_kernel, m, [tree.nodes, links.set, masks, size, bin_omega, exitance, table,
                                                  sent, incoming, coverage], dev)

@@ -259,6 +259,7 @@ def solve(problem) -> Solution:
     problem.direct  # noqa: B018  (traced before the links, as the stages report it)
     links = links_of(problem)
     paths = problem.stages.run("direction masks", path_weights, problem, links, 1, bins)
+    problem.stages.run("direction masks", directions.visible, problem, links)
     tree, dev = problem.tree, problem.device
     d = dev.name
     n = problem.elements.count
@@ -268,6 +269,7 @@ def solve(problem) -> Solution:
 
     def sweep(direct, current, out, k):
         base.exitance(problem, direct, current, exitance)
+        directions.hide(problem, links, exitance)
         node_means(tree, exitance, radiance)
         device_mod.launch(_sent_kernel, links.count, [links.set, radiance, sent], dev)
         path_gather(problem, links, paths, sent, out)
