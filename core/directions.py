@@ -18,10 +18,12 @@ sees it fill its hemisphere where the two overlap and nowhere else. A leaf near 
 parallel to it (``near``) has its cone made from points spread over its own surface
 (``cell_point``), each point's around the perpendicular to the node's plane where it lies under
 the node. Two leaves in contact (``contact``: one's points over the other's surface within a
-tenth of its size) exchange what the reference solver's rays would let through: the leaves under
-a hidden element (its element point over them) stop all its light, shared by how many of its
-surface's points lie over each — so a ceiling cell lit hot at its vertex by the lamp's back and
-reaching past the lamp's rim does not leak around it.
+tenth of its size) exchange what the reference solver's rays would let through: an element
+whose element point lies over a leaf in contact before its face is hidden (``visible``) and
+shows none of its radiance — a ceiling cell lit hot at its vertex by the lamp's back 1 mm below,
+reaching past the lamp's rim; cancelling its light by the lamp's antiradiance leaked round the
+rim — and the leaves under a hidden element stop the rest of what it shows (its antiradiance),
+shared by how many of its surface's points lie over each.
 
 Once per link build, ``masks`` lists for every directed link the bins its two cones cover (what
 antiradiance gathers from and deposits into) and what its arrivals count for (``Masks.gain``);
@@ -435,10 +437,9 @@ def contact(t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.
     Where b's element point (where its direct light was found, and the reference's rays start)
     lies over a leaf in contact with it, b is hidden and all its light is stopped by the leaves
     under it, shared in proportion to how many of its surface's points lie over each
-    (``inner_over``), × b's area over x's; else none. x then sends on as antiradiance all of a
-    hidden b's light, even where b's element reaches past x's rim (a ceiling cell hot at its
-    vertex, overhanging the lamp's edge), which round cones let leak. (−1, 0) when they are not in
-    contact. b's other contacts are found among its own links (``offsets``, ``sender``: CSR)."""
+    (``inner_over``), × b's area over x's; else none. x then sends on as antiradiance all that
+    a hidden b shows it (b's own radiance, if x lies before b's face, b shows no one: ``visible``).
+    (−1, 0) when they are not in contact. b's other contacts are found among its own links (``offsets``, ``sender``: CSR)."""
     if t.descend[x] >= 0 or t.descend[b] >= 0:
         return wp.vec2(-1.0, 0.0)
     ex = t.element[x]

@@ -13,7 +13,10 @@ Each tree node holds a directional table ``[nodes × bins]`` (vec3, ``core.direc
 the node's frame) of what it shows: a leaf's holds −A (A per bin, in its propagation direction;
 what arrived at the front leaves by the back half, what arrived at the back — a one-sided
 emitter's back lit by the ceiling 1 mm above it — by the front half) and it shows its radiance
-L = ρ ⊙ (D + I), isotropic (diffuse), in its front bins besides; an inner node's bin is the mean
+L = ρ ⊙ (D + I), isotropic (diffuse), in its front bins besides, unless it is hidden
+(``directions.visible``: its element point under a surface in contact, as that ceiling's cells
+over the emitter — antiradiance from 1 mm away, cancelling their light, leaked round the
+emitter's rim); an inner node's bin is the mean
 over its leaves, weighted by their projected area |cos| in the bin's centre direction, of what
 each shows that way. One iteration (a launch each):
 

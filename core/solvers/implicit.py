@@ -22,12 +22,14 @@ atomics), any sender with a transfer from either face competes:
 
 Then Jacobi iterations, as the reference solver in lighting units (irradiance/π) with D the
 direct lighting of ``core.direct``: each node's radiance is the area-weighted mean of ρ ⊙ (D + I)
-over its leaves, and each element's indirect lighting I the weighted sum over its path links of
-the senders' radiance, until the largest change is below ``tolerance``, at most ``bounces``.
+over its leaves (none from a hidden element, ``directions.visible``: its point under a surface in
+contact, as the Cornell box's ceiling 1 mm behind its light), and each element's indirect
+lighting I the weighted sum over its path links of the senders' radiance, until the largest
+change is below ``tolerance``, at most ``bounces``.
 
-Known failure: an occluder less than LAYER times nearer than what it hides is taken for its
-neighbour and hides nothing (the hot ceiling 1 mm behind the Cornell box's light leaks whole;
-``tests/core/test_implicit.py`` measures it).
+Known failure: an occluder less than LAYER times nearer than what it hides, and not in contact
+with it, is taken for its neighbour and hides nothing (``tests/core/test_implicit.py`` measures
+it).
 """
 from __future__ import annotations
 

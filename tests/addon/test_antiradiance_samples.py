@@ -2,9 +2,9 @@
 #11): lighting at the vertices of the reflecting meshes at 256 directional bins, as
 ``bench/antiradiance_bench.py --blends`` measures it for README.
 
-Target: ≤ 5 % relative RMSE. Met on the lamp scene (measured 1.6 %, +0.3 % bias); not on the
-Cornell box (measured 6.2 %, +1.9 %: the ceiling lit 1 mm above the emitter's back, see README,
-"Implicit visibility and antiradiance"), whose bound is the measured value, to catch regressions.
+Target: ≤ 5 % relative RMSE, |bias| ≤ 2 %. Measured 1.6 %, +0.3 % on the lamp scene and 3.6 %,
++0.4 % on the Cornell box (6.2 %, +1.9 % while the ceiling lit 1 mm above the emitter's back was
+cancelled by antiradiance rather than hidden, see README, "Implicit visibility and antiradiance").
 """
 from pathlib import Path
 
@@ -18,7 +18,7 @@ from test_reference_vs_cycles import receivers
 
 ROOT = Path(__file__).resolve().parents[2]
 # blend: (largest relative RMSE, largest |mean bias|)
-BOUNDS = {"lamp_scene.blend": (0.05, 0.02), "cornell_box.blend": (0.065, 0.025)}
+BOUNDS = {"lamp_scene.blend": (0.05, 0.02), "cornell_box.blend": (0.05, 0.02)}
 
 
 @pytest.mark.slow
