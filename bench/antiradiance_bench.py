@@ -237,7 +237,7 @@ def anchor(elements: int, target: int, bins: list[str], device: str) -> None:
     best, trials = find_threshold(problem, base, target)
     del problem
     print(f"{count} elements, {nodes} nodes: threshold {best['threshold']:.4g} gives {best['links']} links; "
-          f"tables {', '.join(f'{antiradiance.table_bytes(nodes, int(b)) / 2**20:.0f} MB at {b} bins' for b in bins)}",
+          f"tables up to {', '.join(f'{antiradiance.table_bytes(nodes, int(b)) / 2**20:.0f} MB at {b} bins' for b in bins)}",
           flush=True)
     small = anchor_room(1_000)
     for b in bins:  # kernels loaded and first launches made outside the timings

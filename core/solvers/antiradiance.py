@@ -9,8 +9,9 @@ hierarchical solvers inject it), U unoccluded transport over the links (``core.l
 ``visibility=False, sides=2``: pairs linked whichever faces they show, transfers from both faces
 of the sender), K diffuse reflection and J pass-through. What is propagated is L − A, signed.
 
-Each tree node holds a directional table ``[nodes × bins]`` (vec3, ``core.directions``' bins in
-the node's frame) of what it shows: a leaf's holds −A (A per bin, in its propagation direction;
+Each leaf and each inner node with links (``rows``: one-child cells repeat their child and have
+none, and no one reads the others') holds a directional table ``[rows × bins]`` (vec3,
+``core.directions``' bins in the node's frame) of what it shows: a leaf's holds −A (A per bin, in its propagation direction;
 what arrived at the front leaves by the back half, what arrived at the back — a one-sided
 emitter's back lit by the ceiling 1 mm above it — by the front half) and it shows its radiance
 L = ρ ⊙ (D + I), isotropic (diffuse), in its front bins besides, unless it is hidden
@@ -37,7 +38,7 @@ each shows that way. One iteration (a launch each):
 Iterations stop when the largest change of I is below ``tolerance`` × the largest lighting value,
 at most ``bounces``; each iteration's change is kept (``counts["changes"]``). Values stay signed
 (``cache["signed"]``); the solution, which is output, is clamped at 0. The tables take
-nodes × bins × 28 bytes (``table_bytes``, ``counts["table_bytes"]``; a warning before the solve
+rows × bins × 28 bytes (``table_bytes``, ``counts["table_bytes"]``; a warning before the solve
 above TABLE_WARN), float32: tables rounded to half precision after every pass measured the same
 errors (README), but the incoming table accumulates every link's deposit and would accumulate in
 half; kept float32.
@@ -66,61 +67,66 @@ TABLE_WARN = 2 << 30
 
 
 @wp.func
-def shown(t: Nodes, table: wp.array(dtype=wp.vec3), exitance: wp.array(dtype=wp.vec3), node: int, b: int,
-          size: int) -> wp.vec3:
-    """The signed radiance node ``node`` shows in its bin b: its table's value (−A for a leaf),
-    plus a leaf's radiance ρ ⊙ (D + I) (``exitance``, per element) in its front bins."""
-    v = table[node * size * size + b]
+def shown(t: Nodes, row: wp.array(dtype=wp.int32), table: wp.array(dtype=wp.vec3), exitance: wp.array(dtype=wp.vec3),
+          node: int, b: int, size: int) -> wp.vec3:
+    """The signed radiance node ``node`` shows in its bin b: its table's value (−A for a leaf; its
+    row ``row[node]``), plus a leaf's radiance ρ ⊙ (D + I) (``exitance``, per element) in its
+    front bins."""
+    v = table[row[node] * size * size + b]
     if t.descend[node] < 0 and directions.front(b, size):
         v += exitance[t.element[node]]
     return v
 
 
 @wp.kernel
-def _pull_kernel(offset: int, node0: int, t: Nodes, first_leaf: wp.array(dtype=wp.int32), size: int,
-                 exitance: wp.array(dtype=wp.vec3), table: wp.array(dtype=wp.vec3)):
-    """Inner node bin i: the |cos|-weighted mean of what the node's leaves show in the bin's
-    centre direction."""
+def _pull_kernel(offset: int, linked: wp.array(dtype=wp.int32), n: int, t: Nodes, row: wp.array(dtype=wp.int32),
+                 first_leaf: wp.array(dtype=wp.int32), size: int, exitance: wp.array(dtype=wp.vec3),
+                 table: wp.array(dtype=wp.vec3)):
+    """Bin i of the inner nodes with links (``linked`` after its n leaves; their rows follow the
+    leaves'): the |cos|-weighted mean of what the node's leaves show in the bin's centre
+    direction."""
     i = wp.tid() + offset
     bins = size * size
-    x = node0 + i // bins
+    x = linked[n + i // bins]
     w = directions.to_world(t.normal[x], directions.bin_dir(i % bins, size))
     acc = wp.vec3(0.0)
     total = float(0.0)
     lo = first_leaf[x]
     for leaf in range(lo, lo + int(t.leaves[x] + 0.5)):
-        n = t.normal[leaf]
-        weight = t.area[leaf] * wp.abs(wp.dot(n, w))
-        acc += shown(t, table, exitance, leaf, directions.bin_of(directions.frame_dir(n, w), size), size) * weight
+        normal = t.normal[leaf]
+        weight = t.area[leaf] * wp.abs(wp.dot(normal, w))
+        acc += shown(t, row, table, exitance, leaf, directions.bin_of(directions.frame_dir(normal, w), size),
+                     size) * weight
         total += weight
     out = wp.vec3(0.0)
     if total > 0.0:
         out = acc / total
-    table[node0 * bins + i] = out
+    table[n * bins + i] = out
 
 
 @wp.kernel
-def _transport_kernel(offset: int, t: Nodes, ls: LinkSet, masks: Masks, size: int, bin_omega: float,
-                      exitance: wp.array(dtype=wp.vec3), table: wp.array(dtype=wp.vec3),
-                      sent: wp.array(dtype=wp.vec3), incoming: wp.array(dtype=wp.vec3),
-                      coverage: wp.array(dtype=wp.float32)):
-    """U at receiver node x: each link's signed radiance (``sent``) and the radiance arriving per
-    bin at either face of x (its own row of ``incoming``), and the bin's net coverage (its own row
-    of ``coverage``: senders showing their fronts count +1, their backs −1 — the way out of a
-    closed object — by the share of the bin their cones cover)."""
-    x = wp.tid() + offset
+def _transport_kernel(offset: int, linked: wp.array(dtype=wp.int32), t: Nodes, row: wp.array(dtype=wp.int32),
+                      ls: LinkSet, masks: Masks, size: int, bin_omega: float, exitance: wp.array(dtype=wp.vec3),
+                      table: wp.array(dtype=wp.vec3), sent: wp.array(dtype=wp.vec3),
+                      incoming: wp.array(dtype=wp.vec3), coverage: wp.array(dtype=wp.float32)):
+    """U at receiver node x (row r of ``linked``): each link's signed radiance (``sent``) and the
+    radiance arriving per bin at either face of x (its row of ``incoming``), and the bin's net
+    coverage (its row of ``coverage``: senders showing their fronts count +1, their backs −1 —
+    the way out of a closed object — by the share of the bin their cones cover)."""
+    r = wp.tid() + offset
+    x = linked[r]
     bins = size * size
-    row = x * bins
+    row_x = r * bins
     for b in range(bins):
-        incoming[row + b] = wp.vec3(0.0)
-        coverage[row + b] = 0.0
+        incoming[row_x + b] = wp.vec3(0.0)
+        coverage[row_x + b] = 0.0
     for j in range(ls.offsets[x], ls.offsets[x + 1]):
         sender = ls.sender[j]
         v = wp.vec3(0.0)
         lo = masks.send_offsets[j]
         hi = masks.send_offsets[j + 1]
         for k in range(lo, hi):
-            v += shown(t, table, exitance, sender, int(masks.send[k]), size)
+            v += shown(t, row, table, exitance, sender, int(masks.send[k]), size)
         v /= float(hi - lo)
         sent[j] = v
         lo = masks.receive_offsets[j]
@@ -128,17 +134,19 @@ def _transport_kernel(offset: int, t: Nodes, ls: LinkSet, masks: Masks, size: in
         share = masks.omega[j] / (float(hi - lo) * bin_omega)
         facing = t.spread[sender] * wp.sign(wp.dot(t.normal[sender], t.position[x] - t.position[sender]))
         for k in range(lo, hi):
-            b = row + int(masks.receive[k])
+            b = row_x + int(masks.receive[k])
             incoming[b] = incoming[b] + v * (share * masks.gain[j])
             coverage[b] = coverage[b] + facing * share
 
 
 @wp.kernel
-def _through_kernel(offset: int, t: Nodes, size: int, incoming: wp.array(dtype=wp.vec3),
-                    coverage: wp.array(dtype=wp.float32), table: wp.array(dtype=wp.vec3)):
+def _through_kernel(offset: int, t: Nodes, row: wp.array(dtype=wp.int32), size: int,
+                    incoming: wp.array(dtype=wp.vec3), coverage: wp.array(dtype=wp.float32),
+                    table: wp.array(dtype=wp.vec3)):
     """J at leaf bin i: −(the radiance arriving from the opposite direction, at either face),
-    from the incoming tables of the leaf's root path. The senders' cones, round where the nodes
-    are not, overlap each other in places: where the net coverage exceeds 1 it divides."""
+    from the incoming tables of the nodes with links on the leaf's root path. The senders'
+    cones, round where the nodes are not, overlap each other in places: where the net coverage
+    exceeds 1 it divides."""
     i = wp.tid() + offset
     bins = size * size
     k = i // bins
@@ -147,9 +155,10 @@ def _through_kernel(offset: int, t: Nodes, size: int, incoming: wp.array(dtype=w
     covered = float(0.0)
     x = k
     while x >= 0:
-        b = x * bins + directions.bin_of(directions.frame_dir(t.normal[x], arrival), size)
-        acc += incoming[b]
-        covered += coverage[b]
+        if row[x] >= 0:
+            b = row[x] * bins + directions.bin_of(directions.frame_dir(t.normal[x], arrival), size)
+            acc += incoming[b]
+            covered += coverage[b]
         x = t.parent[x]
     table[i] = -acc / wp.max(covered, 1.0)
 
@@ -161,14 +170,31 @@ def table_bytes(nodes: int, bins: int) -> int:
 
 
 def check(problem) -> list[str]:
-    """A warning before the solve when the tables would be large."""
+    """A warning before the solve when the tables could be large: every tree node's, before the
+    links say which nodes have any."""
     bins = bins_of(problem.settings)
     nodes = problem.tree.count
     need = table_bytes(nodes, bins)
     if need < TABLE_WARN:
         return []
     return [f"antiradiance tables of {problem.elements.count} elements ({nodes} tree nodes) at {bins} bins "
-            f"take {need / 2**30:.1f} GiB; --directional-bins 64 takes {table_bytes(nodes, 64) / 2**30:.2f} GiB"]
+            f"take up to {need / 2**30:.1f} GiB; --directional-bins 64 takes up to "
+            f"{table_bytes(nodes, 64) / 2**30:.2f} GiB"]
+
+
+def rows(problem, links) -> tuple[wp.array, wp.array]:
+    """(int32[m] each tree node's row in the tables, −1 for a node without links; int32[k] the
+    k nodes with rows, in row order): the leaves (rows 0 … n−1, all of them: J writes theirs) and
+    the inner nodes with links — one in eight or fewer (one-child cells repeat their child and
+    get none). Nothing reads the tables of the others."""
+    n, m = problem.elements.count, problem.tree.count
+    has = np.diff(links.set.offsets.numpy()) > 0
+    has[:n] = True
+    linked = np.flatnonzero(has).astype(np.int32)
+    row = np.full(m, -1, np.int32)
+    row[linked] = np.arange(linked.size, dtype=np.int32)
+    d = problem.device.name
+    return wp.array(row, dtype=wp.int32, device=d), wp.array(linked, dtype=wp.int32, device=d)
 
 
 def solve(problem) -> Solution:
@@ -186,33 +212,35 @@ def solve(problem) -> Solution:
     stages.run("direction masks", directions.visible, problem, links)
     tree, dev = problem.tree, problem.device
     d = dev.name
-    n, m = problem.elements.count, tree.count
-    table = wp.zeros(m * bins, dtype=wp.vec3, device=d)
-    incoming = wp.zeros(m * bins, dtype=wp.vec3, device=d)
+    n = problem.elements.count
+    row, linked = rows(problem, links)
+    rowed = linked.size
+    table = wp.zeros(rowed * bins, dtype=wp.vec3, device=d)
+    incoming = wp.zeros(rowed * bins, dtype=wp.vec3, device=d)
     sent = wp.zeros(max(links.count, 1), dtype=wp.vec3, device=d)
     exitance = wp.empty(n, dtype=wp.vec3, device=d)
-    coverage = wp.empty(m * bins, dtype=wp.float32, device=d)
+    coverage = wp.empty(rowed * bins, dtype=wp.float32, device=d)
     first_leaf = links_mod.sampling(tree).first_leaf
-    inner = m - n
     bin_omega = directions.solid_angle(bins)
 
     def sweep(direct, current, out, k):
         base.exitance(problem, direct, current, exitance)
         directions.hide(problem, links, exitance)
-        device_mod.launch(_pull_kernel, inner * bins, [n, tree.nodes, first_leaf, size, exitance, table], dev)
-        device_mod.launch(_transport_kernel, m, [tree.nodes, links.set, masks, size, bin_omega, exitance, table,
-                                                 sent, incoming, coverage], dev)
+        device_mod.launch(_pull_kernel, (rowed - n) * bins, [linked, n, tree.nodes, row, first_leaf, size, exitance,
+                                                        table], dev)
+        device_mod.launch(_transport_kernel, rowed, [linked, tree.nodes, row, links.set, masks, size, bin_omega,
+                                                 exitance, table, sent, incoming, coverage], dev)
         path_gather(problem, links, paths, sent, out)
-        device_mod.launch(_through_kernel, n * bins, [tree.nodes, size, incoming, coverage, table], dev)
+        device_mod.launch(_through_kernel, n * bins, [tree.nodes, row, size, incoming, coverage, table], dev)
 
     changes = []
     t0 = time.perf_counter()
     signed, iterations, _, _ = iterate(problem, sweep, settings.bounces, changes)
     seconds = (time.perf_counter() - t0) / max(iterations, 1)
-    memory = table_bytes(m, bins)
+    memory = table_bytes(rowed, bins)
     return Solution(np.maximum(signed, 0.0), {
         "iterations": iterations, "links": links.count, "link_threshold": links.threshold,
-        "directional_bins": bins, "table_bytes": memory, "changes": changes, "seconds_per_iteration": seconds,
+        "directional_bins": bins, "table_bytes": memory, "table_nodes": rowed, "changes": changes, "seconds_per_iteration": seconds,
         "negative_elements": int((signed < 0).any(axis=1).sum())}, cache={"signed": signed})
 
 
