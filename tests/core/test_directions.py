@@ -73,3 +73,26 @@ def test_a_cones_directions_lie_in_it_and_spread_evenly(dev):
 def test_bin_counts_other_than_64_256_1024_are_refused():
     with pytest.raises(ValueError, match="64, 256, 1024"):
         directions.side(100)
+
+
+def test_elements_under_a_surface_in_contact_are_hidden_and_no_others():
+    """A 0.6 m plate 1 mm under a 2 m ceiling of 0.2 m cells, both facing down, over a floor: the
+    ceiling's elements whose points lie over the plate (the 3 × 3 inside its rim) are hidden
+    (``directions.visible`` 0: they show none of their light); the ceiling's others, the plate
+    (the ceiling lies behind it) and the floor are not."""
+    import shapes
+    from radiosity_baker.core import Settings
+    from radiosity_baker.core.problem import Problem
+    from radiosity_baker.core.solvers.implicit import links_of
+
+    parts = [(*shapes.grid(2.0, 10, z=2.0, flip=True), (0.5,) * 3, (0,) * 3),
+             (*shapes.grid(0.6, 3, z=1.999, flip=True), (0.5,) * 3, (0,) * 3),
+             (*shapes.grid(2.0, 10), (0.5,) * 3, (0,) * 3)]
+    problem = Problem(shapes.scene(parts), Settings(method="antiradiance", device="cpu"))
+    shown = directions.visible(problem, links_of(problem)).numpy()
+    pos, nrm = problem.elements.position, problem.elements.normal
+    ceiling = (pos[:, 2] > pos[:, 2].max() - 5e-4) & (nrm[:, 2] < 0)  # the scene may be moved
+    over = ceiling & (np.abs(pos[:, :2]) < 0.25).all(axis=1)
+    assert over.sum() == 9
+    assert (shown[over] == 0).all()
+    assert (shown[~over] == 1).all()
