@@ -35,8 +35,9 @@ each shows that way. One iteration (a launch each):
   over its root path (ancestors' tables read at the bin's centre direction) and divided by the
   net coverage where that exceeds 1 (round cones overlap).
 
-Iterations stop when the largest change of I is below ``tolerance`` × the largest lighting value,
-at most ``bounces``; each iteration's change is kept (``counts["changes"]``). Values stay signed
+Iterations start from A = 0 and the indirect light 0, or in an animation from the previous
+frame's (its leaves' tables and its solution: the refitted tree keeps its leaves), and stop when
+the largest change of I is below ``tolerance`` × the largest lighting value, at most ``bounces``; each iteration's change is kept (``counts["changes"]``). Values stay signed
 (``cache["signed"]``); the solution, which is output, is clamped at 0. The tables take
 rows × bins × 28 bytes (``table_bytes``, ``counts["table_bytes"]``; a warning before the solve
 above TABLE_WARN), float32: tables rounded to half precision after every pass measured the same
@@ -216,6 +217,11 @@ def solve(problem) -> Solution:
     row, linked = rows(problem, links)
     rowed = linked.size
     table = wp.zeros(rowed * bins, dtype=wp.vec3, device=d)
+    before = problem.previous.cache.get("table") if problem.previous is not None else None
+    if before is not None and before.shape[0] >= n * bins:
+        # an animation's previous frame: its leaves' antiradiance (leaf rows are the refitted
+        # tree's leaves, the same elements) is where this frame's starts
+        wp.copy(table, before, count=n * bins)
     incoming = wp.zeros(rowed * bins, dtype=wp.vec3, device=d)
     sent = wp.zeros(max(links.count, 1), dtype=wp.vec3, device=d)
     exitance = wp.empty(n, dtype=wp.vec3, device=d)
@@ -241,7 +247,7 @@ def solve(problem) -> Solution:
     return Solution(np.maximum(signed, 0.0), {
         "iterations": iterations, "links": links.count, "link_threshold": links.threshold,
         "directional_bins": bins, "table_bytes": memory, "table_nodes": rowed, "changes": changes, "seconds_per_iteration": seconds,
-        "negative_elements": int((signed < 0).any(axis=1).sum())}, cache={"signed": signed})
+        "negative_elements": int((signed < 0).any(axis=1).sum())}, cache={"signed": signed, "table": table})
 
 
 def evaluate(problem, solution: Solution, receivers) -> np.ndarray:

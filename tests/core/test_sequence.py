@@ -63,3 +63,23 @@ def test_progress_of_a_frame_names_it():
     Sequence(Settings(method="direct", device="cpu"), progress=lambda s, f: stages.append(s)).bake(
         frame(0), label="frame 7")
     assert stages and all(s.startswith("frame 7: ") for s in stages)
+
+
+def test_antiradiance_starts_a_frame_from_the_previous_frames_antiradiance():
+    """The leaves' antiradiance carries over with the indirect light (the refitted tree keeps its
+    leaves): measured 8 sweeps to the tolerance where a cold start takes 11 (11 with the indirect
+    light alone), both 1.5 % from the reference. The same frame again converges at once."""
+    settings = Settings(method="antiradiance", device="cpu", light_samples=4, tolerance=1e-4)
+    seq = Sequence(settings)
+    seq.bake(frame(0))
+    warm = seq.bake(frame(1))
+    cold = bake(frame(1), settings)
+    again = seq.bake(frame(1))
+    ref = bake(frame(1), Settings(method="reference", device="cpu", light_samples=4))
+    print(f"\nsweeps: cold {cold.counts['iterations']}, warm {warm.counts['iterations']}, "
+          f"again {again.counts['iterations']}")
+    assert warm.counts["iterations"] < cold.counts["iterations"]
+    assert again.counts["iterations"] <= 2
+    for result in (warm, again):
+        assert metrics.relative_rmse(result.lighting, ref.lighting) <= 0.02
+    assert metrics.relative_rmse(again.indirect, warm.indirect) <= 0.01
