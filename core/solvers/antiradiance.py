@@ -189,7 +189,9 @@ def rows(problem, links) -> tuple[wp.array, wp.array]:
     the inner nodes with links — one in eight or fewer (one-child cells repeat their child and
     get none). Nothing reads the tables of the others."""
     n, m = problem.elements.count, problem.tree.count
-    has = np.diff(links.set.offsets.numpy()) > 0
+    offsets = links.set.offsets.numpy()
+    has = np.diff(offsets) > 0
+    has[links.set.sender.numpy()[:offsets[-1]]] = True  # (links go both ways: senders receive too)
     has[:n] = True
     linked = np.flatnonzero(has).astype(np.int32)
     row = np.full(m, -1, np.int32)
