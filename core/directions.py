@@ -439,7 +439,8 @@ def contact(t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.
     under it, shared in proportion to how many of its surface's points lie over each
     (``inner_over``), × b's area over x's; else none. x then sends on as antiradiance all that
     a hidden b shows it (b's own radiance, if x lies before b's face, b shows no one: ``visible``).
-    (−1, 0) when they are not in contact. b's other contacts are found among its own links (``offsets``, ``sender``: CSR)."""
+    (−1, 0) when they are not in contact. b's other contacts are found among its own links
+    (``offsets``, ``sender``: CSR)."""
     if t.descend[x] >= 0 or t.descend[b] >= 0:
         return wp.vec2(-1.0, 0.0)
     ex = t.element[x]

@@ -11,15 +11,15 @@ of the sender), K diffuse reflection and J pass-through. What is propagated is L
 
 Each leaf and each inner node with links (``rows``: one-child cells repeat their child and have
 none, and no one reads the others') holds a directional table ``[rows × bins]`` (vec3,
-``core.directions``' bins in the node's frame) of what it shows: a leaf's holds −A (A per bin, in its propagation direction;
-what arrived at the front leaves by the back half, what arrived at the back — a one-sided
-emitter's back lit by the ceiling 1 mm above it — by the front half) and it shows its radiance
-L = ρ ⊙ (D + I), isotropic (diffuse), in its front bins besides, unless it is hidden
-(``directions.visible``: its element point under a surface in contact, as that ceiling's cells
-over the emitter — antiradiance from 1 mm away, cancelling their light, leaked round the
-emitter's rim); an inner node's bin is the mean
-over its leaves, weighted by their projected area |cos| in the bin's centre direction, of what
-each shows that way. One iteration (a launch each):
+``core.directions``' bins in the node's frame) of what it shows: a leaf's holds −A (A per bin,
+in its propagation direction; what arrived at the front leaves by the back half, what arrived at
+the back — a one-sided emitter's back lit by the ceiling 1 mm above it — by the front half) and
+it shows its radiance L = ρ ⊙ (D + I), isotropic (diffuse), in its front bins besides, unless it
+is hidden (``directions.visible``: its element point under a surface in contact, as that
+ceiling's cells over the emitter — antiradiance from 1 mm away, cancelling their light, leaked
+round the emitter's rim); an inner node's bin is the mean over its leaves, weighted by their
+projected area |cos| in the bin's centre direction, of what each shows that way. One iteration
+(a launch each):
 
 - pull: the inner nodes' tables from their leaves;
 - U (global pass, one thread per receiver node over its CSR links, no atomics): each link's
@@ -32,17 +32,18 @@ each shows that way. One iteration (a launch each):
 - K: each element's indirect lighting I is its root-path links' unoccluded transfer at the
   element (``implicit.path_weights`` without the nearest filter) × their signed radiance;
 - J (local pass): each leaf bin ← −(the radiance arriving from the opposite direction), summed
-  over its root path (ancestors' tables read at the bin's centre direction) and divided by the
-  net coverage where that exceeds 1 (round cones overlap).
+  over the nodes with links on its root path (their tables read at the bin's centre direction)
+  and divided by the net coverage where that exceeds 1 (round cones overlap).
 
 Iterations start from A = 0 and the indirect light 0, or in an animation from the previous
 frame's (its leaves' tables and its solution: the refitted tree keeps its leaves), and stop when
-the largest change of I is below ``tolerance`` × the largest lighting value, at most ``bounces``; each iteration's change is kept (``counts["changes"]``). Values stay signed
-(``cache["signed"]``); the solution, which is output, is clamped at 0. The tables take
-rows × bins × 28 bytes (``table_bytes``, ``counts["table_bytes"]``; a warning before the solve
-above TABLE_WARN), float32: tables rounded to half precision after every pass measured the same
-errors (README), but the incoming table accumulates every link's deposit and would accumulate in
-half; kept float32.
+the largest change of I is below ``tolerance`` × the largest lighting value, at most
+``bounces``; each iteration's change is kept (``counts["changes"]``). Values stay signed
+(``cache["signed"]``); the solution, which is output, is clamped at 0. The tables take rows ×
+bins × 28 bytes (``table_bytes``, ``counts["table_bytes"]``; a warning before the solve above
+TABLE_WARN), float32: tables rounded to half precision after every pass measured the same errors
+(README), but the incoming table accumulates every link's deposit and would accumulate in half;
+kept float32.
 """
 from __future__ import annotations
 
