@@ -35,7 +35,13 @@ def _pixels(image) -> np.ndarray:
     return px.reshape(h, w, 4)
 
 
-def test_bake_writes_exr_preview_lightmap_uvs_and_a_linear_image(lit_scene, tmp_path):
+@pytest.mark.parametrize("method", ["direct", "implicit", "antiradiance"])
+def test_bake_writes_exr_preview_lightmap_uvs_and_a_linear_image(lit_scene, tmp_path, method):
+    """From the panel (the operator), with direct light and with the two methods whose indirect
+    light needs no rays (issue #11): both targets, and the lightmap agrees with the color
+    attribute at the vertices. The occluder faces the ground: its light is all indirect."""
+    lit_scene.radiosity_baker.method = method
+    bpy.data.objects[OCCLUDER].data.flip_normals()
     ground = bpy.data.objects[GROUND].data
     user_uv = ground.uv_layers.new(name="UVMap")
     user_uv.uv.foreach_set("vector", np.linspace(0, 1, len(ground.loops) * 2, dtype=np.float32))
@@ -61,7 +67,11 @@ def test_bake_writes_exr_preview_lightmap_uvs_and_a_linear_image(lit_scene, tmp_
     per_vertex = vertex_colors(ground, "Lighting")[corner_vert, :3]
     lit = per_vertex.max(axis=1) > 0.2 * per_vertex.max()  # away from the shadow's edges
     error = np.abs(at_corners - per_vertex)[lit].max() / per_vertex.max()
+    bounced = vertex_colors(bpy.data.objects[OCCLUDER].data, "Lighting")[:, :3].mean()
+    print(f"\n{method}: lightmap against the attribute at the vertices {error:.4f}, the occluder's "
+          f"light {bounced:.3f}")
     assert error < 0.05
+    assert (bounced > 0.2) == (method != "direct")  # grey 0.8 ground lit about 1 to 3 below it
 
 
 def test_a_cancelled_bake_adds_no_uv_map_image_or_file(lit_scene, tmp_path):
