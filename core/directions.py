@@ -458,7 +458,7 @@ def contact(t: Nodes, s: Surfels, offsets: wp.array(dtype=wp.int32), sender: wp.
         y = sender[i]
         if near(t, y, b):
             total += inner_over(s, t.element[y], eb)
-            if covers(t, s, y, b):
+            if in_cell(s, t.element[y], s.pos[eb]):  # ``covers``, y already near
                 hidden = True
     power = float(0.0)
     if hidden and total > 0:
