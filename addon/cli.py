@@ -138,7 +138,7 @@ def _compile_kernels(args) -> int:
     t0 = time.perf_counter()
     compiled = device.load_kernels(dev)
     print(f"{PROG}: {compiled} of {len(device.KERNEL_MODULES)} kernel modules compiled for "
-          f"{dev.name} in {time.perf_counter() - t0:.1f} s (the others were cached)")
+          f"{dev.description} in {time.perf_counter() - t0:.1f} s (the others were cached)")
     return 0
 
 
@@ -156,7 +156,8 @@ def _bake(args) -> int:
         raise UsageError(f"{', '.join('--' + name for name in outputs)} must name different files")
     for path in outputs.values():
         check_file(path)
-    device.select(settings.device)  # --device cuda without a GPU: a bad argument, said now
+    # --device cuda without a GPU: a bad argument, said now; else the one line naming the device
+    print(f"{PROG}: baking on {device.select(settings.device).description}", flush=True)
     try:
         bpy.ops.wm.open_mainfile(filepath=str(blend))
     except RuntimeError as exc:

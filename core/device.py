@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import importlib
 import os
+import sys
+import tempfile
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable, Optional
 
@@ -19,6 +22,9 @@ from .errors import SettingsError
 
 _initialised = False
 _load_lock = threading.RLock()
+# What Warp's native library prints to stderr on wp.init() where no CUDA driver is installed; the
+# device line (``Device.description``) says it in our words instead.
+_NO_DRIVER = "Could not find or load the NVIDIA CUDA driver"
 # The package's modules that hold kernels (relative to this package), loaded by load_kernels.
 KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.base", "solvers.reference", "links",
                   "solvers.hierarchical", "directions", "solvers.implicit", "solvers.antiradiance",
@@ -32,20 +38,58 @@ def init_warp() -> None:
         if not _initialised:
             wp.config.log_level = wp.LOG_WARNING
             wp.config.verbose = False
-            wp.init()
+            with _native_stderr_without(_NO_DRIVER):
+                wp.init()
             _initialised = True
+
+
+@contextmanager
+def _native_stderr_without(drop: str):
+    """Run the block with file descriptor 2 (where native code such as Warp's prints) going to a
+    temporary file, then pass on to stderr every line of it that does not contain ``drop``. Where
+    descriptor 2 cannot be redirected (no console), the block runs as it is."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):
+        yield
+        return
+    with tempfile.TemporaryFile() as caught:
+        os.dup2(caught.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            caught.seek(0)
+            kept = [line for line in caught.read().decode(errors="replace").splitlines(keepends=True)
+                    if drop not in line]
+            if kept:
+                sys.stderr.write("".join(kept))
+                sys.stderr.flush()
 
 
 @dataclass(frozen=True)
 class Device:
-    """name: Warp device string ("cpu" or "cuda:0"); threads: CPU threads a launch is split over."""
+    """name: Warp device string ("cpu" or "cuda:0"); threads: CPU threads a launch is split over;
+    why: why this device was chosen (for ``description``), empty when it was asked for."""
 
     name: str
     threads: int
+    why: str = ""
 
     @property
     def is_cuda(self) -> bool:
         return self.name.startswith("cuda")
+
+    @property
+    def description(self) -> str:
+        """One line for users naming the device, e.g. "the CPU (16 threads; no usable CUDA GPU
+        found)" or "the GPU cuda:0 (NVIDIA H200)"."""
+        if self.is_cuda:
+            return f"the GPU {self.name} ({wp.get_device(self.name).name})"
+        return f"the CPU ({self.threads} threads{'; ' + self.why if self.why else ''})"
 
 
 def select(preference: str = "auto") -> Device:
@@ -57,7 +101,7 @@ def select(preference: str = "auto") -> Device:
                             "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
     if preference in ("cuda", "auto") and cuda:
         return Device("cuda:0", 1)
-    return Device("cpu", max(1, os.cpu_count() or 1))
+    return Device("cpu", max(1, os.cpu_count() or 1), "no usable CUDA GPU found" if preference == "auto" else "")
 
 
 def load_kernels(device: Device, on_compile: Optional[Callable[[], None]] = None) -> int:

@@ -143,6 +143,17 @@ def test_python_dash_m_runs_the_same_command(tmp_path):
     assert proc.stderr.strip().splitlines()[-1].startswith("radiosity_baker: error: no such")
 
 
+def test_bake_names_its_device_once_without_warps_driver_warning(lit_blend):
+    env = {k: v for k, v in os.environ.items() if k != "BLENDER_USER_RESOURCES"}
+    proc = subprocess.run([sys.executable, "-m", "radiosity_baker", "bake", str(lit_blend), *FAST],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "Could not find or load the NVIDIA CUDA driver" not in proc.stdout + proc.stderr
+    said = [line for line in proc.stdout.splitlines() if line.startswith("radiosity_baker: baking on ")]
+    assert len(said) == 1, proc.stdout
+    assert said[0].startswith(("radiosity_baker: baking on the CPU (", "radiosity_baker: baking on the GPU "))
+
+
 def test_preview_renders_attribute_and_restores_scene(lit_blend, tmp_path):
     assert cli.main(["bake", str(lit_blend), *FAST]) == 0
     scene = bpy.context.scene
