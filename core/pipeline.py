@@ -104,7 +104,9 @@ class Sequence:
         solver = solvers.get(settings.solver)
         for message in getattr(solver, "check", lambda p: [])(problem):
             stages.warn(message)
-        solution = self._solution = stages.run("solve", solver.solve, problem)
+        solution = stages.run("solve", solver.solve, problem)
+        _finite(solution.values, settings.solver)
+        self._solution = solution
         problem.counts["rays"] += int(solution.counts.get("rays", 0))
         problem.counts.update({k: v for k, v in solution.counts.items() if k != "rays"})
 
@@ -114,6 +116,7 @@ class Sequence:
         field_values = solver.evaluate(problem, solution, vertices)
         indirect = field_values if info.light else none
         output = receivers_mod.compose(settings.baked_content, field_values, direct, vertices)
+        _finite(output, settings.solver)
 
         lightmap_result = None
         if lightmap is not None:
@@ -126,6 +129,14 @@ class Sequence:
                           device=problem.device.name, timings=stages.timings,
                           counts=dict(problem.counts), warnings=stages.warnings,
                           peak_memory_bytes=_peak_rss_bytes(), lightmap=lightmap_result)
+
+
+def _finite(values: np.ndarray, method: str) -> None:
+    """Raise BakeError unless every one of ``values`` is finite: NaN or infinite light is never
+    written."""
+    if not np.isfinite(values).all():
+        raise BakeError(f"method {method} produced light that is not finite (NaN or infinite); "
+                        "nothing was written")
 
 
 def _peak_rss_bytes() -> int:

@@ -67,8 +67,8 @@ class Problem:
             raise BakeError(str(exc)) from None
         if scene.num_triangles == 0:
             raise BakeError("nothing to bake: the scene has no triangles")
-        self.scene = scene = scene.recentred()
         st = self.stages
+        self.scene = scene = _reflecting(scene, st).recentred()
         self.device = st.run("device", device_mod.select, settings.device)
         st.run("kernels", device_mod.load_kernels, self.device,
                lambda: st.report("compiling kernels (first bake only, cached afterwards)", 0.0))
@@ -126,6 +126,7 @@ class Problem:
             scene.validate()
         except ValueError as exc:
             raise BakeError(str(exc)) from None
+        scene = _reflecting(scene, self.stages)
         shift = np.asarray(scene.origin, np.float64) - self.scene.origin
         positions = (np.asarray(scene.positions, np.float64) + shift).astype(np.float32)
         lamps = replace(scene.lamps, position=(np.asarray(scene.lamps.position, np.float64)
@@ -189,6 +190,17 @@ class Problem:
             self.counts["rays"] += made.rays_traced
             self._links[oracle] = made
         return self._links[oracle]
+
+
+def _reflecting(scene: SceneData, stages: Stages) -> SceneData:
+    """``scene`` with its albedo clamped into [0, 1] (``SceneData.reflecting``), warning with the
+    names of the objects whose albedo was outside."""
+    scene, names = scene.reflecting()
+    if names:
+        stages.warn(f"albedo outside [0, 1] clamped to it in {', '.join(names)}: a surface cannot "
+                    "reflect more light than it receives (Cycles clamps a Principled Base Color "
+                    "the same way)")
+    return scene
 
 
 def _mesh(scene: SceneData, device: str) -> wp.Mesh:

@@ -75,7 +75,7 @@ class SceneData:
     triangles: int32[T,3] vertex indices, counter-clockwise seen from the front.
     corner_normals: float32[T,3,3] unit shading normal of each triangle corner.
     tri_object: int32[T] index into ``object_names`` of the object each triangle came from.
-    albedo: float32[T,3] diffuse reflectance in [0,1].
+    albedo: float32[T,3] diffuse reflectance; the bake clamps it into [0,1] (``reflecting``).
     emission: float32[T,3] emitted radiance (W m⁻² sr⁻¹, Blender's Emission Strength × Color),
         leaving both faces.
     lamps: the scene's lamps.
@@ -129,6 +129,18 @@ class SceneData:
             bad_t = bad_v[self.triangles].any(axis=1)
             names = sorted({self.object_names[i] for i in np.unique(self.tri_object[bad_t])})
             raise ValueError(f"NaN or infinite vertex positions in {', '.join(names) or 'the scene'}")
+
+    def reflecting(self) -> tuple["SceneData", list]:
+        """This scene with each albedo channel clamped into [0, 1] (NaN read as 0), as Cycles
+        clamps a Principled Base Color: a surface reflecting more than it receives would make the
+        light grow with every bounce. Also the sorted names of the objects whose albedo changed."""
+        with np.errstate(invalid="ignore"):
+            outside = ~((self.albedo >= 0) & (self.albedo <= 1)).all(axis=1)
+        if not outside.any():
+            return self, []
+        names = sorted({self.object_names[i] for i in np.unique(self.tri_object[outside])})
+        albedo = np.clip(np.nan_to_num(self.albedo, nan=0.0), 0.0, 1.0).astype(np.float32)
+        return replace(self, albedo=albedo), names
 
     def recentred(self) -> "SceneData":
         """This scene with positions relative to the centre of its bounding box (computed and

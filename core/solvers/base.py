@@ -7,6 +7,12 @@ import numpy as np
 import warp as wp
 
 from .. import device as device_mod
+from ..errors import BakeError
+
+# A sweep whose added light (its change, as power: Σ area × |change|) exceeds this many times the
+# larger of the direct light's power and the first sweep's change is diverging: with albedo in
+# [0, 1] each bounce carries at most the power of the one before it.
+GROWTH = 8.0
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -45,7 +51,9 @@ def iterate(problem, sweep, sweeps: int, changes: list | None = None) -> tuple[n
     Returns (float32[n,3] the last indirect lighting, sweeps made, the direct lighting and the
     last indirect lighting on the device). An animation's previous frame (``problem.previous``)
     is the starting point: its light has mostly converged already. ``changes``, when given, gets
-    each sweep's largest change over the largest lighting value (the convergence measure)."""
+    each sweep's largest change over the largest lighting value (the convergence measure).
+    Raises BakeError when the sweeps diverge (the change grows past ``GROWTH``, or a value is not
+    finite), so that no NaN or infinite lighting is ever written."""
     settings, stages, direct = problem.settings, problem.stages, problem.direct
     d = problem.device.name
     n = problem.elements.count
@@ -54,11 +62,20 @@ def iterate(problem, sweep, sweeps: int, changes: list | None = None) -> tuple[n
     current = wp.array(before, dtype=wp.vec3, device=d)
     nxt = wp.zeros(n, dtype=wp.vec3, device=d)
     scale_direct = float(np.abs(direct).max(initial=0.0))
+    area = problem.elements.area.astype(np.float64)
+    floor = power(area, direct)
     made = 0
     for made in range(1, sweeps + 1):
         sweep(dev_direct, current, nxt, made)
         current, nxt = nxt, current
         now = current.numpy()
+        added = power(area, now - before)
+        if made == 1:
+            floor = max(floor, added)
+        if not (np.isfinite(now).all() and added <= GROWTH * floor):
+            raise BakeError(f"method {settings.solver} diverged at bounce {made}: the indirect light "
+                            "grew with each bounce instead of converging (a surface reflecting more "
+                            "than it receives?); nothing was written")
         change = float(np.abs(now - before).max(initial=0.0))
         scale = max(float(np.abs(now).max(initial=0.0)), scale_direct, 1e-30)
         before = now
@@ -68,6 +85,13 @@ def iterate(problem, sweep, sweeps: int, changes: list | None = None) -> tuple[n
         if change <= settings.tolerance * scale:
             break
     return before, made, dev_direct, current
+
+
+def power(area: np.ndarray, values: np.ndarray) -> float:
+    """Σ area × |values| over elements and channels (area float[n] m², values float[n,3]
+    irradiance/π): the power the values stand for, up to π; inf or NaN where a value is."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        return float(area @ np.abs(values.astype(np.float64)).sum(axis=1))
 
 
 def reconstruct(problem, solution: Solution, receivers) -> np.ndarray:

@@ -62,3 +62,45 @@ def test_every_registered_solver_bakes_through_the_same_call():
             assert r.direct.min() > 0
         else:
             assert (r.output == 1.0).all()  # nothing occludes a lone floor
+
+
+ITERATING = ("reference", "hierarchical", "implicit", "antiradiance")
+
+
+def lit_closed_box(albedo: float):
+    """One object, "Box": a closed 1 m cube (inward normals, 3×3 quads a face) of uniform
+    ``albedo``, lit by a 10 W point lamp at its centre. Returns the scene and its triangles' areas."""
+    faces = shapes.box(1.0, 3, inward=True)
+    base = np.cumsum([0] + [len(p) for p, _, _ in faces[:-1]])
+    p = np.concatenate([f[0] for f in faces])
+    n = np.concatenate([f[1] for f in faces])
+    t = np.concatenate([f[2] + b for f, b in zip(faces, base)])
+    scene = shapes.scene([(p, n, t, (albedo,) * 3, (0,) * 3)], shapes.lamp(LAMP_POINT, power=(10,) * 3))
+    scene.object_names = ["Box"]
+    return scene
+
+
+@pytest.mark.parametrize("method", ITERATING)
+def test_albedo_above_one_is_clamped_to_one_with_a_warning_naming_the_object(method):
+    bounces = 16
+    r = bake(lit_closed_box(2.0), Settings(method=method, device="cpu", bounces=bounces))
+    assert np.isfinite(r.output).all()
+    assert any("albedo" in w and "Box" in w for w in r.warnings), r.warnings
+    # albedo 1 in a closed box: every bounce carries the direct light's power on, no more
+    area = np.bincount(r.shading.corner.ravel(), minlength=len(r.direct))  # triangles are equal
+    mean_direct, mean_indirect = area @ r.direct / area.sum(), area @ r.indirect / area.sum()
+    assert (mean_indirect <= 1.05 * bounces * mean_direct).all(), (mean_indirect, mean_direct)
+    np.testing.assert_allclose(r.output, r.lighting)  # output is lighting, albedo plays no part
+
+
+@pytest.mark.parametrize("method", ITERATING)
+def test_a_diverging_iteration_stops_with_a_clear_error_not_nan(method):
+    from radiosity_baker.core.errors import BakeError
+    from radiosity_baker.core.problem import Problem
+    from radiosity_baker.core.solvers import get
+
+    problem = Problem(lit_closed_box(0.5), Settings(method=method, device="cpu", bounces=500))
+    problem.elements.albedo[:] = 3.0  # past the clamp: light triples with every bounce
+    problem.surfels.albedo.fill_(3.0)
+    with pytest.raises(BakeError, match=f"method {method} diverged at bounce"):
+        get(method).solve(problem)
