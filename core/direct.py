@@ -2,7 +2,7 @@
 
 Lighting is irradiance/π at the receiver's normal (radiance units, W m⁻² sr⁻¹), as Cycles bakes
 DIFFUSE Direct without Color. Unoccluded transfer is analytic where it can be (exact polygon form
-factors for area lamps and emissive triangles, inverse-square for point/spot, cosine for sun).
+factors for area lamps and emissive triangles, inverse-square for point/spot, for the sun the projected solid angle of its cone).
 
 Each receiver traces ``light_samples`` shadow rays in all, however many emitters there are: the
 samples are stratified over [0,1) and a light tree (``core.lighttree``) over every lamp and
@@ -214,17 +214,38 @@ def _spot_factor(kind: int, w_from_lamp: wp.vec3, axis: wp.vec3, cos_half: float
 
 
 @wp.func
+def _sun_half_angle(g: Emitters, l: int) -> float:
+    """Half the angular diameter of sun lamp l (rad), at most a right angle (Blender's 180°)."""
+    return wp.min(0.5 * g.lamp_size[l][0], 1.5707963267948966)
+
+
+@wp.func
+def _sun_cosine(cos_t: float, half: float) -> float:
+    """A sun's lighting over its strength S, times π, at a surface whose normal makes the angle
+    with cosine ``cos_t`` with the direction to the sun's centre; ``half`` the sun's half angle
+    (rad, ≤ π/2). Cycles gives the sun the radiance S/(π sin²half) over its cone, so that a
+    surface facing it receives the irradiance S: this is ∫cone max(0, n·ω) dω / (π sin²half),
+    cos_t while the cone stays above the horizon and less once it dips below (the closed form
+    of a spherical cap's projected solid angle, Snyder 1996)."""
+    s2 = wp.sin(half) * wp.sin(half)
+    if half <= 0.0 or cos_t * cos_t >= s2:
+        return wp.max(cos_t, 0.0)
+    sin_t = wp.max(wp.sqrt(wp.max(1.0 - cos_t * cos_t, 0.0)), 1.0e-6)
+    x = wp.sqrt(wp.max(1.0 / s2 - 1.0, 0.0))
+    y = wp.clamp(-x * cos_t / sin_t, -1.0, 1.0)
+    a = sin_t * wp.sqrt(1.0 - y * y)
+    return wp.max(((cos_t * wp.acos(y) - x * a) * s2 + wp.atan2(a, x)) / (3.141592653589793 * s2), 0.0)
+
+
+@wp.func
 def _lamp_transfer(g: Emitters, l: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
     """Unoccluded lighting of lamp l at p (normal n): inverse square for point and spot lamps (no
-    cone: it is applied per shadow sample), cosine for the sun, the exact form factor of an area
+    cone: it is applied per shadow sample), the sun's cone's projected solid angle, the exact form factor of an area
     lamp's outline (one-sided)."""
     kind = g.lamp_kind[l]
     power = g.lamp_power[l]
     if kind == LAMP_SUN:
-        cos_r = -wp.dot(n, g.lamp_dir[l])
-        if cos_r <= 0.0:
-            return wp.vec3(0.0)
-        return power * (cos_r / 3.141592653589793)
+        return power * (_sun_cosine(-wp.dot(n, g.lamp_dir[l]), _sun_half_angle(g, l)) / 3.141592653589793)
     if kind == LAMP_AREA:
         c = g.lamp_pos[l]
         if wp.dot(p - c, g.lamp_dir[l]) <= 0.0:
@@ -263,16 +284,28 @@ def _lamp_shadow(g: Emitters, mesh: wp.uint64, l: int, p: wp.vec3, n: wp.vec3, o
     if trace == 0 and kind != LAMP_SPOT:
         return 1.0, 0
     if kind == LAMP_SUN:
+        # directions uniform over the sun's cone (as Cycles samples it), weighted by their cosine
         w = -g.lamp_dir[l]
-        tan_half = wp.tan(0.5 * g.lamp_size[l][0])
-        if tan_half <= 0.0:
+        half = _sun_half_angle(g, l)
+        if half <= 0.0:
             return visible(mesh, origin, origin + w * far), 1
         t1, t2 = tangent_frame(w)
-        vis = float(0.0)
+        one_minus_cos = 2.0 * wp.sin(0.5 * half) * wp.sin(0.5 * half)
+        acc = wp.vec2(0.0, 0.0)
+        rays = int(0)
         for k in range(k0, k1):
-            ws = wp.normalize(w + _disk(sample2d(k, rot), t1, t2, tan_half, tan_half))
-            vis += visible(mesh, origin, origin + ws * far)
-        return vis / float(k1 - k0), k1 - k0
+            st = sample2d(k, rot)
+            below = st[0] * one_minus_cos  # 1 − cos of the sample's angle from the sun's centre
+            sin_a = wp.sqrt(wp.max(below * (2.0 - below), 0.0))
+            phi = 6.283185307179586 * st[1]
+            ws = w * (1.0 - below) + t1 * (sin_a * wp.cos(phi)) + t2 * (sin_a * wp.sin(phi))
+            cos_r = wp.dot(n, ws)
+            if cos_r > 0.0:
+                acc += wp.vec2(cos_r, cos_r * visible(mesh, origin, origin + ws * far))
+                rays += 1
+        if acc[0] <= 0.0:
+            return 0.0, rays
+        return acc[1] / acc[0], rays
     if kind == LAMP_AREA:
         c = g.lamp_pos[l]
         hx = 0.5 * g.lamp_size[l][0]

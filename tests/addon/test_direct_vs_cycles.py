@@ -170,3 +170,33 @@ def test_direct_light_of_a_2048_triangle_emissive_mesh_matches_cycles(empty_scen
     assert emitters >= 2000
     assert reference.mean() > 0.01
     assert rmse <= TOLERANCE, f"emissive mesh: relative RMSE {rmse:.4f} > {TOLERANCE}"
+
+
+# Suns of every width, tilted 25° so the widest cones dip below the horizon: Cycles samples the
+# cone uniformly with the radiance S/(π sin²half), so a plane facing the sun gets S whatever the
+# angle; a 180° sun is half the sky, and the cube's shadow is soft.
+SUN_ANGLES = (0.0, 90.0, 179.0, 180.0)
+SUN_CUTS = 8            # 8×8 quads, 81 vertices
+SUN_LIGHT_SAMPLES = 512
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("degrees", SUN_ANGLES)
+def test_sun_of_any_angle_matches_cycles(empty_scene, degrees):
+    _mesh("Receiver", cuts=SUN_CUTS, size=1.2)
+    _mesh("Occluder", (0.05, 0.0, 0.4), size=0.3, kind="cube")
+    _lamp("SUN", (0.0, 0.0, 3.0), (25.0, 0.0, 0.0), energy=3.0, angle=math.radians(degrees))
+    reference = cycles_bake_vertex_colors(["Receiver"], passes=("DIRECT",),
+                                          samples=CYCLES_SAMPLES)["Receiver"]
+    ours = _our_direct("Receiver", light_samples=SUN_LIGHT_SAMPLES)
+    rmse = metrics.relative_rmse(ours, reference)
+    ratio = float(ours.sum() / reference.sum())
+    shaded = int(np.argmin(reference[:, 0]))
+    print(f"\nsun {degrees:g}°: relative RMSE {rmse:.4f}, mean ours/Cycles {ratio:.4f}, darkest "
+          f"vertex Cycles {reference[shaded, 0]:.4f} ours {ours[shaded, 0]:.4f}")
+    _record(f"sun_{degrees:g}deg", {"relative_rmse": round(rmse, 5), "mean_ratio": round(ratio, 5),
+                                     "darkest_cycles": round(float(reference[shaded, 0]), 5),
+                                     "darkest_ours": round(float(ours[shaded, 0]), 5),
+                                     "cycles_samples": CYCLES_SAMPLES,
+                                     "light_samples": SUN_LIGHT_SAMPLES})
+    assert rmse <= TOLERANCE, f"sun {degrees:g}°: relative RMSE {rmse:.4f} > {TOLERANCE}"

@@ -70,6 +70,43 @@ def test_sun_gives_strength_times_cosine_over_pi():
         np.testing.assert_allclose(lit, 3 * np.cos(theta) / np.pi, rtol=1e-4)
 
 
+@pytest.mark.parametrize("degrees, shadowed", [(90.0, 1 - 2 * F_UNIT_SQUARE_H1), (179.0, None),
+                                               (180.0, 1 - F_UNIT_SQUARE_H1)])
+def test_a_wide_sun_casts_the_soft_shadow_of_its_cone(degrees, shadowed):
+    """Under a unit square at height 1, a sun straight above whose cone holds the square: the sun's
+    radiance S/(π sin²half) over the cone (Cycles), less what the square hides: lighting
+    S/π · (1 − F/sin²half), F the square's form factor. At 180° that is the sky's hemisphere."""
+    p, n, t = receiver_plane()
+    occluder = shapes.grid(1.0, 1, z=1.0, flip=True)
+    half = np.radians(degrees) / 2
+    lamp = shapes.lamp(LAMP_SUN, direction=(0, 0, -1), size=(np.radians(degrees), 0), power=(3,) * 3)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3), (*occluder, (0.5,) * 3, (0,) * 3)], lamp,
+                      samples=1024)[:len(p)]
+    expect = 3 / np.pi * (shadowed if shadowed is not None else 1 - F_UNIT_SQUARE_H1 / np.sin(half) ** 2)
+    np.testing.assert_allclose(lit.mean(), expect, rtol=0.01)
+    np.testing.assert_allclose(lit, expect, rtol=0.05)  # each receiver: its shadow samples' noise
+
+
+@pytest.mark.parametrize("degrees", [60.0, 120.0, 180.0])
+def test_a_wide_sun_dipping_below_the_horizon_lights_by_the_part_above(degrees):
+    """A sun 70° from the zenith whose cone reaches below the horizon: the projected solid angle of
+    the part of the cone above it, over π sin²half (at 180°: S(1 + cos 70°)/2π)."""
+    p, n, t = receiver_plane()
+    theta, half = np.radians(70.0), np.radians(degrees) / 2
+    lamp = shapes.lamp(LAMP_SUN, direction=(np.sin(theta), 0, -np.cos(theta)),
+                       size=(np.radians(degrees), 0), power=(3,) * 3)
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)
+    rng = np.random.default_rng(0)  # the cone's projected solid angle by Monte Carlo
+    u, v = rng.random(400_000), 2 * np.pi * rng.random(400_000)
+    cos_a = 1 - u * (1 - np.cos(half))
+    sin_a = np.sqrt(1 - cos_a ** 2)
+    cos_n = np.cos(theta) * cos_a + np.sin(theta) * sin_a * np.cos(v)
+    expect = 3 / np.pi * np.maximum(cos_n, 0).mean() * 2 * np.pi * (1 - np.cos(half)) / (np.pi * np.sin(half) ** 2)
+    np.testing.assert_allclose(lit, expect, rtol=0.01)
+    if degrees == 180.0:
+        np.testing.assert_allclose(lit, 3 * (1 + np.cos(theta)) / (2 * np.pi), rtol=0.01)
+
+
 def test_square_area_lamp_radiance_is_power_over_pi_area():
     p, n, t = receiver_plane()
     lamp = shapes.lamp(LAMP_AREA, (0, 0, 1), direction=(0, 0, -1), size=(1, 1), power=(10,) * 3)
