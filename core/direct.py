@@ -679,6 +679,36 @@ def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.
     return out, int(rays.sum())
 
 
+# The back of a surface without thickness counts as lit where its direct light reaches this
+# fraction of the brightest direct lighting of any element.
+BACK_LIGHT = 0.01
+
+
+def lit_backs(problem) -> tuple[list, int]:
+    """(sorted names of the objects without thickness (``elements.open_objects``) whose back faces
+    direct light reaches — at some element at least BACK_LIGHT of the brightest direct lighting
+    of the elements —, shadow rays traced). Elements are one-sided: that light is not passed on,
+    where Cycles reflects it off the back face. An unshadowed pass picks the candidates, a
+    shadowed one (``settings.light_samples``) confirms them."""
+    from . import elements as elements_mod
+
+    scene, els, settings = problem.scene, problem.elements, problem.settings
+    objects = els.objects(scene)
+    at = np.flatnonzero(elements_mod.open_objects(scene)[objects] & (els.area > 0))
+    threshold = BACK_LIGHT * float(problem.direct.max(initial=0.0))
+    if not len(at) or threshold <= 0.0:
+        return [], 0
+    points, backs, sizes = els.position[at], -els.normal[at], problem.element_sizes[at]
+    for mode in (MODE_UNSHADOWED, MODE_FULL):
+        light, rays, _, _ = estimate(problem, points, backs, sizes, np.full(len(at), mode, np.int32),
+                                     settings.light_samples, settings.seed)
+        lit = light.max(axis=1) >= threshold
+        at, points, backs, sizes = at[lit], points[lit], backs[lit], sizes[lit]
+        if not len(at):
+            break
+    return sorted({scene.object_names[i] for i in np.unique(objects[at])}), int(rays.sum())
+
+
 # ``light_selection`` auto weighs every emitter exactly at every receiver where there are at most
 # EXACT_EMITTERS (about as much work per receiver as a few shadow rays) or where that is at most
 # EXACT_WORK weighings in all (a few seconds).

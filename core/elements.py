@@ -5,8 +5,10 @@ different normals (a hard edge) is split into one shading vertex per distinct no
 color attributes are wanted there.
 
 *Elements* are the unknowns of the solvers: here one oriented disk per shading vertex (Bunnell).
-The front face (along the normal) emits and reflects; the back face casts shadow only. Solvers
-that need other elements map them to receivers through ``core.receivers``.
+The front face (along the normal) emits and reflects; the back face casts shadow only, so light
+reaching the back of a surface without thickness (``open_objects``) is not passed on
+(``core.direct.lit_backs`` finds where that happens). Solvers that need other elements map them to
+receivers through ``core.receivers``.
 """
 from __future__ import annotations
 
@@ -70,6 +72,19 @@ def shading_vertices(scene: SceneData) -> ShadingVertices:
                            corner=corner.reshape(t, 3).astype(np.int32))
 
 
+def open_objects(scene: SceneData) -> np.ndarray:
+    """bool[O]: for each of ``scene``'s objects, whether its surface is open — some mesh edge
+    borders one triangle with area only: a surface without thickness (a leaf card, a banner, a
+    floor plane), whose back can be seen and lit."""
+    tris = scene.triangles[scene.triangle_areas() > 0]
+    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    _, inverse, uses = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    open_triangle = (uses[inverse.reshape(-1)] == 1).reshape(3, -1).any(axis=0)
+    out = np.zeros(len(scene.object_names), bool)
+    out[scene.tri_object[scene.triangle_areas() > 0][open_triangle]] = True
+    return out
+
+
 @dataclass
 class Elements:
     """n disks, one per shading vertex.
@@ -96,6 +111,10 @@ class Elements:
     @property
     def count(self) -> int:
         return int(self.position.shape[0])
+
+    def objects(self, scene: SceneData) -> np.ndarray:
+        """int32[n]: the object (index into ``scene.object_names``) of each element."""
+        return scene.tri_object[self.fan_triangles[self.fan_offsets[:-1]]]
 
 
 def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:

@@ -11,6 +11,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from . import direct as direct_mod
 from . import receivers as receivers_mod
 from . import solvers
 from .errors import BakeCancelled, BakeError
@@ -104,6 +105,13 @@ class Sequence:
         solver = solvers.get(settings.solver)
         for message in getattr(solver, "check", lambda p: [])(problem):
             stages.warn(message)
+        if info.indirect:
+            backs, rays = stages.run("direct", direct_mod.lit_backs, problem)
+            problem.counts["rays"] += rays
+            if backs:
+                stages.warn(f"light reaches the back of {', '.join(backs)}, a surface without "
+                            "thickness whose back is left dark: it is not reflected on to other "
+                            "surfaces as Cycles would (give it thickness, e.g. a Solidify modifier)")
         solution = stages.run("solve", solver.solve, problem)
         _finite(solution.values, settings.solver)
         self._solution = solution

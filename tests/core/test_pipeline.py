@@ -6,7 +6,7 @@ import pytest
 
 import shapes
 from radiosity_baker.core import BakeCancelled, BakeError, Settings, bake
-from radiosity_baker.core.scene import LAMP_POINT
+from radiosity_baker.core.scene import LAMP_POINT, Lamps
 
 
 def lit_plane(albedo=(0.5, 0.25, 0.1), emission=(0.0, 0.0, 0.0)):
@@ -88,3 +88,30 @@ def test_a_first_bake_says_it_compiles_kernels_and_later_ones_do_not(monkeypatch
     assert not any(s.startswith("compiling kernels") for s in stages_of())  # cached by now
     monkeypatch.setattr(device_mod, "_cached", lambda module, device: False)  # as on a fresh install
     assert sum(s.startswith("compiling kernels") for s in stages_of()) == 1
+
+
+def banner_lit(below: bool, above: bool):
+    """A 1 m plane "Banner" facing +Z with a "Wall" beside it facing it, and a point lamp under the
+    banner (its back) and/or over it (its front)."""
+    banner = shapes.grid(1.0, 4)
+    wall = shapes.quad([(0.6, -0.5, -1), (0.6, 0.5, -1), (0.6, 0.5, 1), (0.6, -0.5, 1)], 4, 4, (0, 0, 0))
+    lamps = [shapes.lamp(LAMP_POINT, (0, 0, z), power=(50,) * 3) for z, on in ((-1, below), (1, above)) if on]
+    scene = shapes.scene([(*banner, (0.8,) * 3, (0,) * 3), (*wall, (0.8,) * 3, (0,) * 3)],
+                         Lamps.concat(lamps))
+    scene.object_names = ["Banner", "Wall"]
+    return scene
+
+
+def backs_left_dark(result) -> list:
+    return [w for w in result.warnings if "back of" in w]
+
+
+@pytest.mark.parametrize("below, above", [(True, False), (True, True)])
+def test_a_surface_without_thickness_lit_from_behind_is_named_as_left_dark_there(below, above):
+    warned = backs_left_dark(bake(banner_lit(below, above), Settings(method="reference", device="cpu")))
+    assert len(warned) == 1 and "Banner" in warned[0] and "Wall" not in warned[0], warned
+
+
+def test_surfaces_lit_only_from_the_front_or_baked_without_bounces_are_not_warned_about():
+    assert not backs_left_dark(bake(banner_lit(False, True), Settings(method="reference", device="cpu")))
+    assert not backs_left_dark(bake(banner_lit(True, False), Settings(method="direct", device="cpu")))
