@@ -106,7 +106,7 @@ class Sequence:
         for message in getattr(solver, "check", lambda p: [])(problem):
             stages.warn(message)
         if info.indirect:
-            backs, rays = stages.run("direct", direct_mod.lit_backs, problem)
+            backs, rays = stages.run("lit backs", direct_mod.lit_backs, problem)
             problem.counts["rays"] += rays
             if backs:
                 stages.warn(f"light reaches the back of {', '.join(backs)}, a surface without "
