@@ -6,7 +6,7 @@ import threading
 
 import bpy
 
-from . import cli, lightmap, live, operator, panel, props
+from . import cli, live, operator, panel, props
 
 _cli_handle = None
 
@@ -42,7 +42,7 @@ def register() -> None:
     _compile_kernels_ahead()
     props.register()
     live.register()
-    for cls in operator.classes + lightmap.classes + panel.classes:
+    for cls in operator.classes + panel.classes:
         bpy.utils.register_class(cls)
     try:
         _cli_handle = bpy.utils.register_cli_command("radiosity_baker", cli.main)
@@ -55,7 +55,7 @@ def unregister() -> None:
     if _cli_handle is not None:
         bpy.utils.unregister_cli_command(_cli_handle)
         _cli_handle = None
-    for cls in reversed(operator.classes + lightmap.classes + panel.classes):
+    for cls in reversed(operator.classes + panel.classes):
         bpy.utils.unregister_class(cls)
     live.unregister()
     props.unregister()

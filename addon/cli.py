@@ -285,7 +285,7 @@ def _report(job: BakeJob, settings: Settings, blend: str, outputs: dict) -> dict
         "frames": job.frames,
         "input": blend,
         "outputs": outputs,
-        "lightmaps": {page: str(path) for page, path in job.lightmap_files.items()},
+        "lightmaps": {page: str(path) for page, path in job.files.items()},
     }
 
 

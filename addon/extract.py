@@ -19,6 +19,7 @@ import numpy as np
 from ..core.elements import shading_vertices
 from ..core.scene import (LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SHAPE_ELLIPSE,
                           SHAPE_RECTANGLE, Lamps, SceneData)
+from .tags import NODE_MULTIPLY
 
 # Object types whose evaluated geometry is a surface (others: empties, cameras, hair, volumes…).
 # The depsgraph hands the non-mesh ones out already converted, as a mesh instance of themselves.
@@ -260,8 +261,6 @@ def _linked_node(socket):
 def _before_lightmap_multiply(socket):
     """The socket that held ``socket``'s value before ``--hookup multiply`` put its Multiply node in
     between (its A input, which took over the link or the value); ``socket`` itself otherwise."""
-    from .lightmap import NODE_MULTIPLY  # that module imports this one
-
     node = _linked_node(socket)
     while node is not None and node.name == NODE_MULTIPLY:
         socket = next(s for s in node.inputs if s.identifier == "A_Color")

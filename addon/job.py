@@ -18,8 +18,8 @@ from typing import Callable, Iterable, Optional
 
 from ..core import BakeCancelled, BakeError, Settings
 from ..core.pipeline import Sequence
-from . import animation, extract, lightmap, props, write
-from .outputs import Staging
+from . import extract, props
+from .writers import WRITERS
 
 # Errors caused by the scene, the settings (core.errors.SettingsError is a BakeError) or where the
 # results go (outputs.OutputError): shown to the user as their message alone. Anything else is a
@@ -35,8 +35,12 @@ class BakeJob:
     that bakes (notify as each warning of the bake arises, e.g. a long bake announced before it
     runs). After ``finish()``: ``result`` (core BakeResult, of the last frame), ``frames`` (per
     baked frame: frame, seconds, stages, counts), ``timings`` (seconds per stage over all frames,
-    extraction and writing included), ``warnings`` (extraction, bake and writing) and ``seconds``
-    (wall time).
+    extraction and writing included), ``warnings`` (extraction, bake and writing), ``seconds``
+    (wall time) and ``files`` ({name: path} of the files written).
+
+    Each core target the settings ask for (``settings.targets``) has its writer
+    (``addon.writers``), which checks, stages and writes its results; the writers read the job's
+    ``extraction``, ``result``, ``frame``, ``frames_left``, ``baked_frames`` and ``frame_now``.
     """
 
     def __init__(self, settings: Settings, receivers: Optional[Iterable[str]] = None,
@@ -47,15 +51,13 @@ class BakeJob:
         self.receivers = None if receivers is None else list(receivers)
         self._user_progress = progress
         self._notify = notify
-        self._todo = list(frames) if frames is not None else settings.frame_list()
-        self.animation = self._todo is not None
+        self.frames_left = list(frames) if frames is not None else settings.frame_list()
+        self.animation = self.frames_left is not None
         self._sequence = None
-        self._frame = None          # the frame being baked (None: the current one, no animation)
-        self._frame_now = None      # the scene's frame when the bake started
-        self._baked: list = []      # (frame, extraction, result) per baked frame
-        self._first_lightmap = None  # an animation's first frame: (request, LightmapResult, paths)
-        self._staging = None        # an animation's lightmap files, staged frame by frame
-        self._folder = None
+        self.frame = None           # the frame being baked (None: the current one, no animation)
+        self.frame_now = None       # the scene's frame when the bake started
+        self.baked_frames: list = []  # (frame, extraction, result) per baked frame
+        self.writers = [WRITERS[name](self) for name in settings.targets]
         self.frames: list = []
         self._cancel = threading.Event()
         self._lock = threading.Lock()
@@ -63,8 +65,6 @@ class BakeJob:
         self._thread: Optional[threading.Thread] = None
         self._t0 = 0.0
         self.extraction = None
-        self.lightmap_request = None
-        self.lightmap_files: dict = {}
         self.result = None
         self.error: Optional[BaseException] = None
         self.timings: dict[str, float] = {}
@@ -88,7 +88,7 @@ class BakeJob:
         bake it in a worker thread. Does nothing while a frame bakes, after an error or a cancel."""
         if self._thread is not None and self._thread.is_alive():
             return
-        if self.error is None and not self._cancel.is_set() and self._todo:
+        if self.error is None and not self._cancel.is_set() and self.frames_left:
             self._extract(context)
             self._launch()
 
@@ -98,7 +98,7 @@ class BakeJob:
         while True:
             self._extract(context)
             self._bake()
-            if self.error is not None or not self._todo:
+            if self.error is not None or not self.frames_left:
                 break
         return self.finish(context)
 
@@ -107,7 +107,7 @@ class BakeJob:
         with self._lock:
             stage, fraction = self._stage, self._fraction
         idle = self._thread is None or not self._thread.is_alive()
-        done = idle and (self.error is not None or self._cancel.is_set() or not self._todo)
+        done = idle and (self.error is not None or self._cancel.is_set() or not self.frames_left)
         return stage, fraction, done
 
     def cancel(self) -> None:
@@ -115,7 +115,7 @@ class BakeJob:
         removes what was staged; so does this call when no frame is baking)."""
         self._cancel.set()
         if self._thread is None or not self._thread.is_alive():
-            self._discard_staging()
+            self._discard()
 
     def finish(self, context) -> list[str]:
         """Wait for the bake, then write the results in one step; returns all warnings.
@@ -127,41 +127,25 @@ class BakeJob:
         if self.error is None and self._cancel.is_set():
             self.error = BakeCancelled("bake cancelled")
         if self.error is not None:
-            self._discard_staging()
+            self._discard()
             raise self.error
         try:
             return self._write(context)
         finally:
-            self._discard_staging()
+            self._discard()
+
+    @property
+    def files(self) -> dict:
+        """{name: path} of the files the writers put on disk."""
+        return {name: path for w in self.writers for name, path in w.files.items()}
 
     def _write(self, context) -> list[str]:
         t0 = time.perf_counter()
-        # Every check first (objects resolved by name, names free): a failure writes nothing.
-        colors = maps = None
-        if self.settings.target in ("vertex_colors", "both"):
-            if self.animation:
-                colors = animation.prepare([(f, ex, r.output) for f, ex, r in self._baked],
-                                           self.settings.attribute, self.settings, self._frame_now,
-                                           context)
-            else:
-                colors = write.prepare_color_attributes(self.extraction, self.result.output,
-                                                        self.settings.attribute, self.settings, context)
-        sequence = None
-        if self._staging is not None:  # an animation: the first frame's layout, staged files
-            request, result, self.lightmap_files = self._first_lightmap
-            maps = lightmap.prepare(result, request, self.settings)
-            self._staging.commit()
-            frames = [f for f, _, _ in self._baked]
-            sequence = (frames[0], frames[-1] - frames[0] + 1)
-        elif self.lightmap_request is not None:
-            result = self.result.lightmap
-            maps = lightmap.prepare(result, self.lightmap_request, self.settings)
-            # files next, all or none: a disk error leaves Blender untouched
-            self.lightmap_files = lightmap.write_files(result, self.settings)
-        if colors is not None:
-            self.warnings += colors.apply(context)
-        if maps is not None:
-            self.warnings += maps.apply(result, self.lightmap_files, self.settings, sequence)
+        # Every check first (objects resolved by name, names free), files next: a failure leaves
+        # Blender's data untouched.
+        pending = [w.prepare(context) for w in self.writers]
+        for apply in pending:
+            self.warnings += apply()
         self.timings["write"] = time.perf_counter() - t0
         self.seconds = time.perf_counter() - self._t0
         if hasattr(context.scene, "radiosity_baker"):  # the CLI may run without the add-on registered
@@ -171,27 +155,25 @@ class BakeJob:
     def _begin(self, context) -> None:
         self._t0 = time.perf_counter()
         self.settings.validate()
-        self._frame_now = context.scene.frame_current
+        self.frame_now = context.scene.frame_current
         self._sequence = Sequence(self.settings, self._on_progress, self._cancel, self._notify)
         if self.animation and self.settings.bake_copy:
             raise BakeError("--bake-copy bakes one frame's evaluated mesh: it does not go with a "
                             "frame range")
-        if self.animation and self.settings.target != "vertex_colors":
-            # every frame's pages are staged as they are baked and go into place together
-            self._folder = lightmap.output_folder(self.settings)
-            self._staging = Staging()
+        for w in self.writers:
+            w.begin(context)
 
     def _extract(self, context) -> None:
         """Extract the next frame (the current one for a still bake), the scene's frame restored."""
         t0 = time.perf_counter()
-        self._frame = self._todo.pop(0) if self.animation else None
+        self.frame = self.frames_left.pop(0) if self.animation else None
         scene = context.scene
-        if self._frame is not None and self._frame != scene.frame_current:
-            scene.frame_set(self._frame)
+        if self.frame is not None and self.frame != scene.frame_current:
+            scene.frame_set(self.frame)
             try:
                 self._extract_current(context)
             finally:
-                scene.frame_set(self._frame_now)
+                scene.frame_set(self.frame_now)
         else:
             self._extract_current(context)
         self.timings["extract"] = self.timings.get("extract", 0.0) + time.perf_counter() - t0
@@ -212,24 +194,8 @@ class BakeJob:
             else:
                 where = f"among {', '.join(self.receivers)}" if self.receivers else "named"
             raise extract.ExtractionError(f"nothing to write: no visible mesh with faces {where}")
-        if self.settings.target in ("vertex_colors", "both") and not self._baked:
-            names = [self.settings.attribute]
-            if self.animation:
-                names += [animation.frame_attribute(self.settings.attribute, f)
-                          for f in [self._frame, *self._todo]]
-            for name in names:
-                write.check_color_attributes(self.extraction, name, self.settings, context)
-        if self.settings.target in ("lightmap", "both"):
-            lightmap.output_folder(self.settings)  # an unwritable folder fails before baking
-            request, warnings = lightmap.request(self.extraction, self.settings)
-            first = self._first_lightmap
-            if first is not None:  # an animation's later frames: the first frame's layout
-                for t in request.targets:
-                    t.corner_uv = first[1].uv.get(t.mesh_name, t.corner_uv)
-                request.sizes = first[1].sizes
-            else:
-                self.warnings += warnings
-            self.lightmap_request = request
+        for w in self.writers:
+            w.check(context)
 
     # -- any thread ------------------------------------------------------------------------------
 
@@ -240,45 +206,28 @@ class BakeJob:
     def _bake(self) -> None:
         """Bake the extracted frame; any exception is kept for ``finish()`` to raise on the main
         thread."""
-        label = f"frame {self._frame}" if self._frame is not None else ""
+        label = f"frame {self.frame}" if self.frame is not None else ""
         t0 = time.perf_counter()
         try:
-            self.result = self._sequence.bake(self.extraction.scene, self.lightmap_request, label)
+            self.result = self._sequence.bake(self.extraction.scene, [w.target() for w in self.writers],
+                                              label)
+            for w in self.writers:
+                w.baked(self.result)
         except BaseException as exc:  # noqa: BLE001 - re-raised by finish()
             self.error = exc
             return
         for stage, seconds in self.result.timings.items():
             self.timings[stage] = self.timings.get(stage, 0.0) + seconds
         self.warnings += [w for w in self.result.warnings if w not in self.warnings]
-        if self._staging is not None:
-            try:
-                self._stage_lightmaps()
-            except BaseException as exc:  # noqa: BLE001 - re-raised by finish()
-                self.error = exc
-                return
         if self.animation:
-            self._baked.append((self._frame, self.extraction, self.result))
-            self.frames.append({"frame": self._frame, "seconds": round(time.perf_counter() - t0, 4),
+            self.baked_frames.append((self.frame, self.extraction, self.result))
+            self.frames.append({"frame": self.frame, "seconds": round(time.perf_counter() - t0, 4),
                                 "stages": {k: round(v, 4) for k, v in self.result.timings.items()},
                                 "counts": self.result.counts})
 
-    def _stage_lightmaps(self) -> None:
-        """Stage the pages of the frame just baked as ``<page>.<frame>.exr``, and again for each
-        frame up to the next baked one (a sequence with a step holds each frame), so the image
-        sequence has a file for every scene frame."""
-        upto = self._todo[0] if self._todo else self._frame + 1
-        paths = None
-        for frame in range(self._frame, upto):
-            written = lightmap.write_files(self.result.lightmap, self.settings, self._staging, frame,
-                                           self._folder)
-            paths = paths or written
-        if self._first_lightmap is None:
-            self._first_lightmap = (self.lightmap_request, self.result.lightmap, paths)
-
-    def _discard_staging(self) -> None:
-        if self._staging is not None:
-            self._staging.__exit__(None, None, None)  # removes what was staged
-            self._staging = None
+    def _discard(self) -> None:
+        for w in self.writers:
+            w.discard()
 
     def _on_progress(self, stage: str, fraction: float) -> None:
         with self._lock:

@@ -1,6 +1,6 @@
 """Lightmaps in Blender: reading ``Lightmap`` UV maps before a bake, and in the job's final step
-writing the EXR files, the UV maps, the images and (on request) the material nodes; the
-``object.radiosity_bake_clear`` operator removes exactly what a bake added.
+writing the EXR files, the UV maps, the images and (on request) the material nodes; ``clear``
+removes exactly what a bake added (the ``object.radiosity_bake_clear`` operator).
 
 What a bake adds is tagged so that clearing never touches the user's data: UV maps it created carry
 the mesh custom property ``radiosity_baker_uv``, images it loaded ``radiosity_baker_lightmap``, and
@@ -21,19 +21,16 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core.lightmap import LightmapRequest, LightmapTarget, files
+from ..core.lightmap import LightmapRequest, LightmapObject, files
 from .extract import ExtractionError
 from .outputs import OutputError, Staging, check_folder
+from .tags import IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, UV_TAG
 from .write import name_clash
 
 UV_NAME = "Lightmap"
 # The object property holding an object's own texel density (0 or absent: the scene's).
 DENSITY_PROP = "radiosity_baker_texel_density"
 MAX_UV_LAYERS = 8
-UV_TAG = "radiosity_baker_uv"
-IMAGE_TAG = "radiosity_baker_lightmap"
-NODE_PREFIX = "RB Lightmap"
-NODE_UV, NODE_IMAGE, NODE_MULTIPLY = (f"{NODE_PREFIX} UV", f"{NODE_PREFIX}", f"{NODE_PREFIX} Multiply")
 COLORSPACE = "Linear Rec.709"
 
 
@@ -107,7 +104,7 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
     where another kind of layer is called ``Lightmap`` (OutputError), or a color attribute of that
     name baked alongside.
     """
-    if settings.target == "both" and settings.attribute == UV_NAME:
+    if "vertices" in settings.targets and settings.attribute == UV_NAME:
         raise OutputError(f"the color attribute cannot be called '{UV_NAME}' when lightmaps are baked "
                           f"too: their UV map has that name")
     warnings, targets = [], []
@@ -130,7 +127,7 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
             corner_uv = np.empty(len(me.loops) * 2, np.float32)
             layer.uv.foreach_get("vector", corner_uv)
             corner_uv = corner_uv.reshape(-1, 2)
-        targets.append(LightmapTarget(
+        targets.append(LightmapObject(
             object_name=ob.name, mesh_name=me.name, corner_vert=t.corner_vert,
             corner_triangles=t.corner_triangles,
             triangle_offset=t.triangle_offset, corner_uv=corner_uv,
@@ -375,27 +372,3 @@ def clear(objects) -> int:
         bpy.data.images.remove(image)
         removed += 1
     return removed
-
-
-class OBJECT_OT_radiosity_bake_clear(bpy.types.Operator):
-    """Remove the lightmap UV maps, images and material nodes radiosity bakes added"""
-
-    bl_idname = "object.radiosity_bake_clear"
-    bl_label = "Clear Radiosity Lightmaps"
-    bl_options = {'REGISTER', 'UNDO'}
-
-    use_selected: bpy.props.BoolProperty(
-        name="Selected Only", default=True,
-        description="Clear only the selected objects (all objects when none is selected)")
-
-    def execute(self, context):
-        objects = [ob for ob in context.selected_objects] if self.use_selected else []
-        objects = objects or list(context.scene.objects)
-        from . import animation
-
-        removed = clear(objects) + animation.clear(objects)
-        self.report({'INFO'}, f"Radiosity bake: {removed} items removed")
-        return {'FINISHED'}
-
-
-classes = (OBJECT_OT_radiosity_bake_clear,)

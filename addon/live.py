@@ -27,12 +27,11 @@ import numpy as np
 
 from ..core import BakeCancelled, BakeError
 from ..core.pipeline import Sequence
+from ..core.solvers import PREVIEW, SOLVERS
 from . import extract, write
 
 # Seconds between timer ticks.
 INTERVAL = 0.1
-# Methods fast enough to follow the user; others preview with Bunnell.
-FAST = ("direct", "bunnell", "ao")
 SUFFIX = " Preview"
 
 _session: Optional["Preview"] = None
@@ -60,7 +59,7 @@ class Preview:
     def __init__(self, scene):
         self.scene_name = scene.name
         settings = scene.radiosity_baker.to_settings()
-        method = settings.method if settings.solver in FAST else "bunnell"
+        method = settings.method if SOLVERS[settings.solver].live else PREVIEW
         self.settings = replace(settings, method=method, target="vertex_colors", bake_copy=False,
                                 frames="").validate()
         self.attribute = preview_attribute(self.settings)

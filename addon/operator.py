@@ -1,4 +1,5 @@
-"""``object.radiosity_bake``: bake the scene's lighting into the selected (or all) meshes."""
+"""``object.radiosity_bake``: bake the scene's lighting into the selected (or all) meshes;
+``object.radiosity_bake_clear``: remove what bakes added to them."""
 from __future__ import annotations
 
 import traceback
@@ -7,6 +8,7 @@ import bpy
 from bpy.props import BoolProperty
 
 from ..core import BakeCancelled
+from . import animation, lightmap
 from .job import USER_ERRORS, BakeJob
 
 # The running modal bake's progress, read by the status bar draw function: (stage, fraction).
@@ -150,4 +152,23 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         return {'FINISHED'}
 
 
-classes = (OBJECT_OT_radiosity_bake,)
+class OBJECT_OT_radiosity_bake_clear(bpy.types.Operator):
+    """Remove the lightmap UV maps, images and material nodes radiosity bakes added"""
+
+    bl_idname = "object.radiosity_bake_clear"
+    bl_label = "Clear Radiosity Lightmaps"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    use_selected: bpy.props.BoolProperty(
+        name="Selected Only", default=True,
+        description="Clear only the selected objects (all objects when none is selected)")
+
+    def execute(self, context):
+        objects = [ob for ob in context.selected_objects] if self.use_selected else []
+        objects = objects or list(context.scene.objects)
+        removed = lightmap.clear(objects) + animation.clear(objects)
+        self.report({'INFO'}, f"Radiosity bake: {removed} items removed")
+        return {'FINISHED'}
+
+
+classes = (OBJECT_OT_radiosity_bake, OBJECT_OT_radiosity_bake_clear)

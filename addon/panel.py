@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..core.settings import Settings, reads
+from ..core.settings import TARGET_OUTPUTS, Settings, reads
 from .operator import OBJECT_OT_radiosity_bake
 
 
@@ -42,7 +42,7 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
             _prop(col, s, name)
         layout.prop(s, "bake_copy")
         col = layout.column(heading="Lightmap")
-        col.active = s.target != "vertex_colors"
+        col.active = "lightmap" in TARGET_OUTPUTS[s.target]
         for name in ("texel_density", "max_size", "atlas_pages", "padding", "layout", "output",
                      "hookup", "reunwrap", "supersample", "texel_indirect", "texel_links", "texel_shadows",
                      "shadow_budget", "lightmap_format", "pack_images"):

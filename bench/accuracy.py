@@ -34,9 +34,10 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from radiosity_baker.addon.compare import bake_vertex_values, stack
-from radiosity_baker.addon.cycles_ref import cycles_bake_image, cycles_bake_vertex_colors
-from radiosity_baker.core import Settings, metrics
+from harness.compare import bake_vertex_values, stack
+from harness.cycles import cycles_bake_image, cycles_bake_vertex_colors
+from radiosity_baker.core import Settings
+from harness import metrics
 from radiosity_baker.core import settings as core_settings
 from radiosity_baker.core.solvers import SOLVERS
 
@@ -204,7 +205,7 @@ def _denoised(pyoidn, image: np.ndarray) -> tuple:
     """(float32[H,W,3] RGB, seconds) of a Cycles image bake (float32[H,W,4], alpha = baked)
     denoised by OIDN's lightmap filter after its charts were dilated into the gutter (a bake
     margin of DENOISE_MARGIN texels), as lightmappers that bake with Cycles do."""
-    from radiosity_baker.core.lightmap.pages import dilate
+    from radiosity_baker.core["lightmap"].pages import dilate
 
     t0 = time.perf_counter()
     rgb = dilate(image[..., :3], image[..., 3] > 0.5, DENOISE_MARGIN)
@@ -242,7 +243,7 @@ def _our_lightmap(names, size: int, output: Path):
     t0 = time.perf_counter()
     job = BakeJob(settings, names)
     job.run_sync(bpy.context)
-    return job.result.lightmap.pages[0], time.perf_counter() - t0, job.timings
+    return job.result["lightmap"].pages[0], time.perf_counter() - t0, job.timings
 
 
 def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes, pair_samples,

@@ -30,10 +30,11 @@ os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="rb-benc
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
-from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors  # noqa: E402
+from harness.cycles import cycles_bake_vertex_colors  # noqa: E402
 from radiosity_baker.addon.extract import extract_scene  # noqa: E402
 from radiosity_baker.addon.write import _per_vertex  # noqa: E402
-from radiosity_baker.core import Settings, metrics  # noqa: E402
+from radiosity_baker.core import Settings  # noqa: E402
+from harness import metrics  # noqa: E402
 from radiosity_baker.core.pipeline import Sequence  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -60,7 +60,8 @@ import results_file  # noqa: E402
 from rooms import room  # noqa: E402
 from test_hierarchical import box_room  # noqa: E402
 
-from radiosity_baker.core import Settings, bake, links, metrics  # noqa: E402
+from radiosity_baker.core import Settings, bake, links  # noqa: E402
+from harness import metrics  # noqa: E402
 from radiosity_baker.core import device as device_mod  # noqa: E402
 from radiosity_baker.core.problem import Problem  # noqa: E402
 from radiosity_baker.core.scene import LAMP_POINT  # noqa: E402
@@ -130,7 +131,7 @@ def samples(blends, bins) -> dict:
     """Errors against the reference on the sample scenes (bpy), per method and bin count."""
     import bpy
 
-    from radiosity_baker.addon.compare import bake_vertex_values, stack
+    from harness.compare import bake_vertex_values, stack
 
     sys.path.insert(0, str(ROOT / "tests" / "addon"))
     from test_reference_vs_cycles import receivers

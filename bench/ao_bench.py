@@ -136,7 +136,8 @@ def sample_scenes() -> dict:
     import bpy
 
     from radiosity_baker.addon.extract import extract_scene
-    from radiosity_baker.core import bake, metrics
+    from radiosity_baker.core import bake
+    from harness import metrics
 
     root = Path(__file__).resolve().parents[1] / "sample_blends"
     out = {}

@@ -54,7 +54,7 @@ def page(settings: dict, cache: str, save: str | None = None) -> dict:
 
     from radiosity_baker.addon.extract import extract_scene
     from radiosity_baker.addon.lightmap import request
-    from radiosity_baker.core import Settings, bake
+    from radiosity_baker.core import Settings, bake, targets
 
     bpy.ops.wm.open_mainfile(filepath=str(CORNELL))
     extraction = extract_scene(bpy.context.evaluated_depsgraph_get())
@@ -62,12 +62,12 @@ def page(settings: dict, cache: str, save: str | None = None) -> dict:
     lm_request, _ = request(extraction, s)
     lm_request.cache_dir = Path(cache)
     t0 = time.perf_counter()
-    result = bake(extraction.scene, s, lightmap=lm_request)
+    result = bake(extraction.scene, s, targets=[targets.make("lightmap", lm_request)])
     total = time.perf_counter() - t0
-    p = result.lightmap.pages[0]
+    p = result["lightmap"].pages[0]
     if save:
         np.save(save, p.rgb)
-    return {"size": list(p.size), "pages": len(result.lightmap.pages), "texels": int(result.counts["texels"]),
+    return {"size": list(p.size), "pages": len(result["lightmap"].pages), "texels": int(result.counts["texels"]),
             "density": round(p.density, 1), "seconds_total": round(total, 3),
             "seconds": {k: round(v, 4) for k, v in result.timings.items()}, "rays": int(result.counts["rays"]),
             "elements": int(result.counts["elements"]), "device": result.device}
@@ -151,8 +151,8 @@ def shadows(size, budgets, reference_samples, baseline) -> dict:
 def lights(counts) -> list:
     import numpy as np
 
-    from radiosity_baker.core import Settings, bake
-    from radiosity_baker.core.lightmap import LightmapRequest, LightmapTarget
+    from radiosity_baker.core import Settings, bake, targets
+    from radiosity_baker.core.lightmap import LightmapRequest, LightmapObject
     from radiosity_baker.core.scene import Lamps, SceneData
 
     rng = np.random.default_rng(3)
@@ -177,7 +177,7 @@ def lights(counts) -> list:
                           tri_object=np.r_[np.zeros(len(ft)), np.ones(count)].astype(np.int32),
                           albedo=np.full((nt, 3), 0.5, np.float32), emission=emission, lamps=Lamps.empty(),
                           object_names=["Floor", "Emitters"])
-        target = LightmapTarget("Floor", "Floor", corner_vert=ft.ravel().astype(np.int32),
+        target = LightmapObject("Floor", "Floor", corner_vert=ft.ravel().astype(np.int32),
                                 corner_triangles=np.arange(3 * len(ft), dtype=np.int32).reshape(-1, 3),
                                 triangle_offset=0)
         row = {"emitters": count}
@@ -186,7 +186,8 @@ def lights(counts) -> list:
             settings = Settings(method="direct", max_size=size, texel_density=1e4, atlas_pages="one",
                                 light_selection=selection, texel_shadows=shadows)
             load = _load()
-            r = bake(scene, settings, lightmap=LightmapRequest([target], cache_dir=Path(tempfile.mkdtemp())))
+            r = bake(scene, settings, targets=[targets.make("lightmap", LightmapRequest(
+                [target], cache_dir=Path(tempfile.mkdtemp())))])
             seconds = r.timings["texel direct"]
             row[label] = {"texels": int(r.counts["texels"]), "seconds": round(seconds, 3),
                               "microseconds_per_texel": round(1e6 * seconds / r.counts["texels"], 3),

@@ -42,7 +42,8 @@ from ao_bench import terrain  # noqa: E402  (the same deforming mesh as the AO b
 from rooms import room, sun  # noqa: E402
 import results_file  # noqa: E402
 
-from radiosity_baker.core import Settings, bake, links, metrics  # noqa: E402
+from radiosity_baker.core import Settings, bake, links  # noqa: E402
+from harness import metrics  # noqa: E402
 from radiosity_baker.core.problem import Problem  # noqa: E402
 from radiosity_baker.core.solvers import hierarchical  # noqa: E402
 

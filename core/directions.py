@@ -38,10 +38,8 @@ import warp as wp
 
 from . import device as device_mod
 from .formfactor import tangent_frame
-from .gather import fan_centre
 from .hierarchy import Nodes
-from .problem import Surfels
-from .solvers.reference import fan_sample, fan_triangle
+from .surfels import Surfels, fan_centre, fan_sample, fan_triangle
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 

@@ -160,3 +160,20 @@ def tangent_frame(w: wp.vec3):
         a = wp.vec3(0.0, 1.0, 0.0)
     t = wp.normalize(wp.cross(w, a))
     return t, wp.cross(w, t)
+
+
+@wp.func
+def cluster_ff(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float,
+               leaves: float) -> float:
+    """Form factor of a cluster of ``leaves`` disks: as many disks of its mean area at its centre
+    (their sum, not one disk of the whole area, whose π d² + A denominator would be too large) for
+    aligned normals (spread 1); an isotropic blob of projected area A/4 (a closed convex surface's
+    mean) where they cancel (spread 0); linearly between."""
+    d = q - p
+    d2 = wp.dot(d, d)
+    if d2 <= 0.0:
+        return 0.0
+    cos_r = wp.max(wp.dot(n, d) / wp.sqrt(d2), 0.0)
+    each = area / leaves
+    iso = 0.25 * area * cos_r / (3.141592653589793 * d2 + 0.25 * each)
+    return spread * leaves * disk_ff(p, n, q, nq, each) + (1.0 - spread) * iso

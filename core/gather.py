@@ -32,10 +32,10 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .formfactor import disk_ff, fan_ff
+from .formfactor import cluster_ff, disk_ff, fan_ff
 from .hemisphere import BINS, CELL, bins_vec, frame_of, splat_of
 from .hierarchy import Nodes
-from .problem import Surfels
+from .surfels import Surfels, fan_centre
 from .traversal import cut_advance, cut_begin, cut_skip, cut_weight, opening
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
@@ -63,45 +63,6 @@ class Gather:
     bent_normal: np.ndarray
     light: Optional[np.ndarray]
     visits: np.ndarray
-
-
-@wp.func
-def cluster_ff(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, area: float, spread: float,
-               leaves: float) -> float:
-    """Form factor of a cluster of ``leaves`` disks: as many disks of its mean area at its centre
-    (their sum, not one disk of the whole area, whose π d² + A denominator would be too large) for
-    aligned normals (spread 1); an isotropic blob of projected area A/4 (a closed convex surface's
-    mean) where they cancel (spread 0); linearly between."""
-    d = q - p
-    d2 = wp.dot(d, d)
-    if d2 <= 0.0:
-        return 0.0
-    cos_r = wp.max(wp.dot(n, d) / wp.sqrt(d2), 0.0)
-    each = area / leaves
-    iso = 0.25 * area * cos_r / (3.141592653589793 * d2 + 0.25 * each)
-    return spread * leaves * disk_ff(p, n, q, nq, each) + (1.0 - spread) * iso
-
-
-@wp.func
-def fan_centre(e: int, vertex: wp.array(dtype=wp.int32), fan_offsets: wp.array(dtype=wp.int32),
-               fan_triangles: wp.array(dtype=wp.int32), tris: wp.array(dtype=wp.int32),
-               points: wp.array(dtype=wp.vec3)) -> wp.vec3:
-    """The area-weighted centre of element e's share of its triangles (a third each, around its
-    vertex)."""
-    total = float(0.0)
-    acc = wp.vec3(0.0)
-    pv = points[vertex[e]]
-    for k in range(fan_offsets[e], fan_offsets[e + 1]):
-        tri = fan_triangles[k]
-        a = points[tris[3 * tri]]
-        b = points[tris[3 * tri + 1]]
-        c = points[tris[3 * tri + 2]]
-        w = wp.length(wp.cross(b - a, c - a))
-        total += w
-        acc += w * (pv + (a + b + c) / 3.0) * 0.5
-    if total > 0.0:
-        return acc / total
-    return pv
 
 
 @wp.func

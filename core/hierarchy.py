@@ -23,7 +23,7 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .problem import Surfels
+from .surfels import Surfels
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -294,7 +294,7 @@ def build(problem) -> Tree:
 
 def refit(tree: Tree, surfels) -> Tree:
     """Recompute ``tree``'s node disks in place from the elements' disks in ``surfels``
-    (``core.problem.Surfels``, updated by the caller for moved elements: same elements, same
+    (``core.surfels.Surfels``, updated by the caller for moved elements: same elements, same
     topology). The Morton order is kept, so a large motion leaves looser (slower, still correct)
     clusters: rebuild then."""
     dev = tree.device

@@ -22,13 +22,13 @@ link carries both directions.
 
 A link's transfer both ways is estimated where it is made (``sampled_transfer``): ``rays`` sample
 pairs, one leaf of each node (a leaf node is its own), stratified; per sample the element form
-factor from the receiving leaf's point to the sending leaf (``reference.point_ff``: disk far,
+factor from the receiving leaf's point to the sending leaf (``surfels.point_ff``: disk far,
 exact triangles near) per unit area, times one of the reference's visibility rays between the two
 leaves (``element_ray``; with visibility). Given a radiance estimate, leaves are drawn in proportion to area × (radiance
 + a floor), and each direction's mean is weighted by the radiance at its sending end over the
 sampling density (self-normalised), so what a link carries is Σ A·B·F·V over the sender — a hot
 spot hidden in a cluster (the ceiling 1 mm above the Cornell light) does not leak through the
-cluster's visible parts. Two leaves get the reference solver's element form factors and
+cluster's visible parts. Two leaves get the element form factors of ``core.surfels`` and
 ``pair_hits``: with leaves only, links are the reference's transport. Solvers without explicit
 visibility (antiradiance, implicit visibility) ask for ``visibility=False``; antiradiance, whose
 antiradiance crosses surfaces, also for ``sides=2``: pairs whose faces see each other either way
@@ -56,11 +56,10 @@ import warp as wp
 
 from . import device as device_mod
 from .errors import BakeError
-from .gather import cluster_ff
+from .formfactor import cluster_ff
 from .hierarchy import Nodes
-from .problem import Surfels
 from .rays import lift, visible
-from .solvers.reference import face_ff, fan_sample, pair_hits
+from .surfels import Surfels, face_ff, fan_sample, pair_hits
 
 DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
 # Peak bytes per link (both directions): the pair and its five values while it is made, then two
@@ -247,8 +246,8 @@ def canonical(t: Nodes, node: int) -> int:
 @wp.func
 def centroid_ff(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int) -> float:
     """Unoccluded form factor from point p (unit normal n) to the front of node b: a leaf's element
-    form factor (``reference.point_ff``), else the cluster form factor of b's disks gathered at
-    its centre (``gather.cluster_ff``)."""
+    form factor (``surfels.point_ff``), else the cluster form factor of b's disks gathered at
+    its centre (``formfactor.cluster_ff``)."""
     return face_centroid_ff(t, s, p, n, b, 1.0)
 
 
@@ -271,7 +270,7 @@ def sided_ff(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int, sides: int) -
 
 @wp.func
 def sided_element_ff(s: Surfels, p: wp.vec3, n: wp.vec3, e: int, sides: int) -> float:
-    """``reference.point_ff`` to the front of element e, plus its back when ``sides`` is 2."""
+    """``surfels.point_ff`` to the front of element e, plus its back when ``sides`` is 2."""
     f = face_ff(s, p, n, e, 1.0)
     if sides == 2:
         f += face_ff(s, p, n, e, -1.0)

@@ -1,8 +1,8 @@
 """The one orchestrator: SceneData + Settings -> BakeResult, for the operator, the CLI and the tests.
 
 It builds the problem, dispatches once to the chosen solver through the registry, and evaluates
-the solution at the receivers asked for (shading vertices; lightmap texels), composing the content
-the same way for both.
+the solution at the receivers of every target asked for (``core.targets``: shading vertices,
+lightmap texels, …) through one path (``receivers.light_at``), with no branch on the target's kind.
 """
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ from typing import Callable, Optional
 import numpy as np
 
 from . import direct as direct_mod
-from . import receivers as receivers_mod
 from . import solvers
+from . import targets as target_registry
 from .errors import BakeCancelled, BakeError
 from .problem import Problem
+from .receivers import light_at
 from .scene import SceneData
 from .settings import Settings, flag
 from .stages import ProgressFn, Stages
@@ -25,43 +26,46 @@ __all__ = ["BakeResult", "BakeCancelled", "BakeError", "bake"]
 
 @dataclass
 class BakeResult:
-    """Per-shading-vertex results, all float32[S,3] in linear RGB (radiance units, W m⁻² sr⁻¹).
+    """What a bake made: ``targets`` {target name: its result} (the ``vertices`` target's is a
+    ``core.targets.vertices.VertexLight``, the ``lightmap`` target's a ``core.lightmap.LightmapResult``;
+    ``result[name]`` reads one), the device, timings (seconds per stage), counts (objects,
+    triangles, elements, lamps, rays, pairs, iterations, texels …), warnings and peak memory.
 
-    lighting: irradiance/π at the shading normal (direct + indirect).
-    direct, indirect: its two parts.
-    output: the content the settings asked for (lighting, combined, indirect or ao: accessibility
-    in all three channels).
-    shading: the ``core.elements.ShadingVertices`` the values are per (its ``corner``: the shading
-    vertex of each scene triangle corner, where a mesh vertex's corners get their values).
-    timings: seconds per stage; counts: objects, triangles, elements, lamps, rays, pairs, iterations.
-    lightmap: the lightmap pages (``core.lightmap.LightmapResult``) when a lightmap was requested.
+    lighting, direct, indirect, output, shading: the ``vertices`` target's fields, float32[S,3]
+    per shading vertex (see ``VertexLight``), for bakes that asked for it.
     """
 
-    lighting: np.ndarray
-    direct: np.ndarray
-    indirect: np.ndarray
-    output: np.ndarray
-    shading: object
+    targets: dict
     device: str
     timings: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     peak_memory_bytes: int = 0
-    lightmap: object = None
+
+    def __getitem__(self, name: str):
+        if name not in self.targets:
+            raise KeyError(f"the bake made no {name!r} result (it made: {', '.join(self.targets)})")
+        return self.targets[name]
+
+    lighting = property(lambda self: self["vertices"].lighting)
+    direct = property(lambda self: self["vertices"].direct)
+    indirect = property(lambda self: self["vertices"].indirect)
+    output = property(lambda self: self["vertices"].output)
+    shading = property(lambda self: self["vertices"].shading)
 
 
 def bake(scene: SceneData, settings: Settings, progress: Optional[ProgressFn] = None,
-         cancel=None, lightmap=None, notify: Optional[Callable[[str], None]] = None) -> BakeResult:
-    """Bake ``scene`` with ``settings``.
+         cancel=None, targets: Optional[list] = None,
+         notify: Optional[Callable[[str], None]] = None) -> BakeResult:
+    """Bake ``scene`` with ``settings`` into ``targets`` (objects made by ``core.targets.make``;
+    default: the shading vertices alone).
 
     progress(stage, fraction) is called as stages advance; ``cancel`` is an object with ``is_set()``
     (e.g. threading.Event) checked between kernel launches: when set, BakeCancelled is raised.
     notify(message) hears each warning as it arises (a long bake is announced before it runs).
     Raises BakeError (clear message) for input that cannot be baked.
-    lightmap: a ``core.lightmap.LightmapRequest``: its objects are also unwrapped, rasterised and
-    evaluated per texel into ``BakeResult.lightmap``.
     """
-    return Sequence(settings, progress, cancel, notify).bake(scene, lightmap)
+    return Sequence(settings, progress, cancel, notify).bake(scene, targets)
 
 
 class Sequence:
@@ -84,8 +88,8 @@ class Sequence:
         self.problem: Optional[Problem] = None
         self._solution = None
 
-    def bake(self, scene: SceneData, lightmap=None, label: str = "") -> BakeResult:
-        """Bake one frame; see :func:`bake`."""
+    def bake(self, scene: SceneData, targets: Optional[list] = None, label: str = "") -> BakeResult:
+        """Bake one frame into ``targets``; see :func:`bake`."""
         progress = self._progress
         if label and progress is not None:
             progress = (lambda stage, fraction, p=progress: p(f"{label}: {stage}", fraction))
@@ -101,8 +105,8 @@ class Sequence:
             problem.previous = self._solution
         else:
             problem = self.problem = Problem(scene, settings, stages)
-        info = solvers.SOLVERS[settings.solver]
         solver = solvers.get(settings.solver)
+        info = solvers.SOLVERS[settings.solver]
         for message in getattr(solver, "check", lambda p: [])(problem):
             stages.warn(message)
         if info.indirect:
@@ -118,25 +122,15 @@ class Sequence:
         problem.counts["rays"] += int(solution.counts.get("rays", 0))
         problem.counts.update({k: v for k, v in solution.counts.items() if k != "rays"})
 
-        vertices = receivers_mod.at_elements(problem)
-        none = np.zeros((len(vertices), 3), np.float32)
-        direct = problem.direct if info.light else none  # AO needs no light
-        field_values = solver.evaluate(problem, solution, vertices)
-        indirect = field_values if info.light else none
-        output = receivers_mod.compose(settings.baked_content, field_values, direct, vertices)
-        _finite(output, settings.solver)
-
-        lightmap_result = None
-        if lightmap is not None:
-            from .lightmap import bake_lightmaps
-
-            lightmap_result = bake_lightmaps(lightmap, problem, solver, solution)
-            problem.counts["texels"] = lightmap_result.texels
-        return BakeResult(lighting=(direct + indirect).astype(np.float32), direct=direct,
-                          indirect=indirect, output=output, shading=problem.shading,
-                          device=problem.device.name, timings=stages.timings,
+        results = {}
+        for target in targets if targets is not None else target_registry.default():
+            at = target.receivers(problem)
+            light = light_at(problem, solver, solution, at)
+            _finite(light.output, settings.solver)
+            results[target.name] = target.finish(problem, at, light)
+        return BakeResult(targets=results, device=problem.device.name, timings=stages.timings,
                           counts=dict(problem.counts), warnings=stages.warnings,
-                          peak_memory_bytes=_peak_rss_bytes(), lightmap=lightmap_result)
+                          peak_memory_bytes=_peak_rss_bytes())
 
 
 def _finite(values: np.ndarray, method: str) -> None:

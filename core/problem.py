@@ -3,7 +3,7 @@
 It holds the scene (recentred: see ``SceneData.recentred``), the settings, the device, the stages
 (progress, cancellation, timings, warnings), the shading vertices and elements, and everything the
 kernels read, uploaded to the device once: the BVH of all triangles, the lights, and the elements
-as one ``Surfels`` struct. Direct light per element, the cluster tree and (for link-based
+as one ``surfels.Surfels`` struct. Direct light per element, the cluster tree and (for link-based
 solvers) links are computed the first time they are asked for and kept (links per oracle, until
 the scene moves).
 """
@@ -18,6 +18,7 @@ import warp as wp
 from . import device as device_mod
 from . import direct as direct_mod
 from . import elements as elements_mod
+from . import surfels as surfels_mod
 from .errors import BakeError
 from .scene import SceneData
 from .settings import Settings
@@ -26,34 +27,11 @@ from .stages import Stages
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
 
-@wp.struct
-class Surfels:
-    """The elements and the triangles they stand for, as kernels read them.
-
-    mesh: BVH id of all triangles; points: vec3[V] vertex positions (m) and tris: int32[3T] flat
-    triangle corners (the BVH's own arrays); pos, nrm: vec3[n] element disks (m, unit); area:
-    float32[n] (m²); albedo, emission: vec3[n]; vertex: int32[n] the vertex each element sits on;
-    fan_offsets: int32[n+1] and fan_triangles: int32[≤3T], each element's triangles (CSR).
-    """
-
-    mesh: wp.uint64
-    points: wp.array(dtype=wp.vec3)
-    tris: wp.array(dtype=wp.int32)
-    pos: wp.array(dtype=wp.vec3)
-    nrm: wp.array(dtype=wp.vec3)
-    area: wp.array(dtype=wp.float32)
-    albedo: wp.array(dtype=wp.vec3)
-    emission: wp.array(dtype=wp.vec3)
-    vertex: wp.array(dtype=wp.int32)
-    fan_offsets: wp.array(dtype=wp.int32)
-    fan_triangles: wp.array(dtype=wp.int32)
-
-
 class Problem:
     """One bake of ``scene`` with ``settings`` (validated here).
 
     scene: the recentred SceneData; shading: ``elements.ShadingVertices``; elements:
-    ``elements.Elements`` (host arrays); surfels: the same on the device (``Surfels``); mesh: the
+    ``elements.Elements`` (host arrays); surfels: the same on the device (``surfels.Surfels``); mesh: the
     ``wp.Mesh`` BVH; lights: ``direct.Lights``; far: a length (m) beyond the scene; stages:
     ``core.stages.Stages``; counts: what was made and traced, for the report.
     """
@@ -83,19 +61,7 @@ class Problem:
         self.lights = st.run("bvh", direct_mod.Lights, scene, self.device)
         extent = float(np.linalg.norm(scene.positions.max(axis=0) - scene.positions.min(axis=0))) or 1.0
         self.far = extent * 1e3 + 1e3
-        s = Surfels()
-        s.mesh = self.mesh.id
-        s.points = self.mesh.points
-        s.tris = self.mesh.indices
-        s.pos = wp.array(els.position, dtype=wp.vec3, device=d)
-        s.nrm = wp.array(els.normal, dtype=wp.vec3, device=d)
-        s.area = wp.array(els.area, dtype=wp.float32, device=d)
-        s.albedo = wp.array(els.albedo, dtype=wp.vec3, device=d)
-        s.emission = wp.array(els.emission, dtype=wp.vec3, device=d)
-        s.vertex = wp.array(els.vertex, dtype=wp.int32, device=d)
-        s.fan_offsets = wp.array(els.fan_offsets, dtype=wp.int32, device=d)
-        s.fan_triangles = wp.array(els.fan_triangles, dtype=wp.int32, device=d)
-        self.surfels = s
+        self.surfels = surfels_mod.upload(els, self.mesh, d)
         # The solution of the previous frame of an animation (``pipeline.Sequence``), which
         # iterating solvers start from; None for a first or single frame.
         self.previous = None
@@ -141,17 +107,14 @@ class Problem:
         self.mesh.points.assign(positions)
         self.mesh.refit()
         self.lights = direct_mod.Lights(scene, self.device)
-        s = self.surfels
-        for name in ("pos", "nrm", "albedo", "emission"):
-            getattr(s, name).assign(getattr(els, {"pos": "position", "nrm": "normal"}.get(name, name)))
-        s.area.assign(els.area)
+        surfels_mod.assign(self.surfels, els)
         self.__dict__.pop("direct", None)
         self.counts["rays"] = 0
         self._links.clear()  # links are made again from scratch over the refitted tree
         if "tree" in self.__dict__:
             from . import hierarchy
 
-            hierarchy.refit(self.tree, s)
+            hierarchy.refit(self.tree, self.surfels)
 
     @property
     def element_sizes(self) -> np.ndarray:

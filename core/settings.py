@@ -34,6 +34,9 @@ class _Methods:
 METHODS = _Methods()
 CONTENTS = ("lighting", "combined", "indirect", "ao")
 TARGETS = ("vertex_colors", "lightmap", "both")
+# The core targets (``core.targets``) each choice of ``target`` bakes into.
+TARGET_OUTPUTS = {"vertex_colors": ("vertices",), "lightmap": ("lightmap",),
+                  "both": ("vertices", "lightmap")}
 LAYOUTS = ("atlas", "per_object")
 ATLAS_PAGES = ("many", "one")
 HOOKUPS = ("none", "node", "multiply")
@@ -231,13 +234,18 @@ class Settings:
                 raise SettingsError(f"{f.name} must be at most {opt.high:g}, not {value}")
         if not self.attribute or not self.attribute.strip():
             raise SettingsError("attribute name must not be empty")
-        if self.target != "vertex_colors" and not self.output.strip():
+        if "lightmap" in self.targets and not self.output.strip():
             raise SettingsError("output folder must not be empty when baking lightmaps")
         self.frame_list()
         if self.content == "indirect" and not SOLVERS[self.solver].indirect:
             raise SettingsError(f"content indirect needs a method with indirect light; method "
                                 f"{self.method} computes none (it would bake black)")
         return self
+
+    @property
+    def targets(self) -> tuple:
+        """The names of the core targets ``target`` bakes into (``TARGET_OUTPUTS``)."""
+        return TARGET_OUTPUTS[self.target]
 
     def frame_list(self) -> Optional[list[int]]:
         """The frames of ``frames`` (A:B or A:B:STEP, B included), None when empty; raises

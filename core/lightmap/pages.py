@@ -1,7 +1,7 @@
-"""Lightmap pages: which objects share a page, their UVs, per-texel lighting, dilation, seams.
-
-:func:`bake_lightmaps` is the lightmap part of ``core.pipeline.bake``: it runs as stages of that one
-orchestrator (unwrap, raster, texel direct light, …) after the per-vertex solution exists.
+"""Lightmap pages: which objects share a page and their UVs (:func:`lay_out`), the texels of each
+page (:func:`rasterize`), and the pages made from the values at those texels (:func:`assemble`:
+resolve, dilation, seams). The lightmap target (``core.targets.lightmap``) runs them as stages of
+the one orchestrator, the light at the texels coming through the path every target shares.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ UDIM_FIRST = 1001
 
 
 @dataclass
-class LightmapTarget:
+class LightmapObject:
     """One object to lightmap (the add-on's ``TargetMesh`` plus its existing UVs).
 
     object_name, mesh_name: Blender names; objects sharing ``mesh_name`` share its UV map.
@@ -109,8 +109,8 @@ class _Group:
     all objects (``per_object`` False) or one per object."""
 
     name: str
-    owners: list            # LightmapTarget per mesh (the first object using it)
-    objects: dict           # mesh name -> [LightmapTarget] using it
+    owners: list            # LightmapObject per mesh (the first object using it)
+    objects: dict           # mesh name -> [LightmapObject] using it
     unwrap: bool
     per_object: bool
 
@@ -124,7 +124,7 @@ def _plan(targets: list, settings) -> tuple[list, list]:
     is baked (the others would overlap it); per_object gives each object its own page.
     """
     warnings = []
-    owners: dict[str, LightmapTarget] = {}
+    owners: dict[str, LightmapObject] = {}
     users: dict[str, list] = {}
     for t in targets:
         owners.setdefault(t.mesh_name, t)
@@ -150,12 +150,12 @@ def _plan(targets: list, settings) -> tuple[list, list]:
     return groups, warnings
 
 
-def _triangles(t: LightmapTarget) -> slice:
+def _triangles(t: LightmapObject) -> slice:
     """The target's triangles among the scene's."""
     return slice(t.triangle_offset, t.triangle_offset + t.corner_triangles.shape[0])
 
 
-def _mesh_vertices(t: LightmapTarget, scene) -> np.ndarray:
+def _mesh_vertices(t: LightmapObject, scene) -> np.ndarray:
     """float32[N,3] position of each mesh vertex (from any of its corners)."""
     n = int(t.corner_vert.max()) + 1 if t.corner_vert.size else 0
     out = np.zeros((n, 3), np.float32)
@@ -163,7 +163,7 @@ def _mesh_vertices(t: LightmapTarget, scene) -> np.ndarray:
     return out
 
 
-def _corner_uv(t: LightmapTarget, tri_uv: np.ndarray) -> tuple[np.ndarray, int]:
+def _corner_uv(t: LightmapObject, tri_uv: np.ndarray) -> tuple[np.ndarray, int]:
     """Per-corner UVs float32[C,2] from per-triangle-corner UVs, and how many triangles disagree
     with them (a polygon cut by a chart seam: its corners can hold one UV each)."""
     c = t.corner_vert.shape[0]
@@ -193,7 +193,7 @@ def _page_side(owners: list, scene, uvs: dict, settings) -> tuple[tuple, float]:
     return (side, side), side / np.sqrt(world / texture)
 
 
-def _asked(target: LightmapTarget, settings) -> float:
+def _asked(target: LightmapObject, settings) -> float:
     """The texel density asked for ``target`` (texels per metre): its own, else the settings'."""
     return float(target.density) if target.density else float(settings.texel_density)
 
@@ -220,16 +220,26 @@ def _pages(group, tile, members: list, size: tuple, density: float) -> list:
     return [(group.name, tile, [o.object_name for o in members], size, density, members)]
 
 
-def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> LightmapResult:
-    """Lay out, rasterise and evaluate the lightmaps of ``request``: stages of ``pipeline.bake``
-    after the solve. Each covered texel is a receiver (``core.receivers``): direct light traced per
-    texel, the solver's ``evaluate`` at the texel (interpolation, a final gather, the AO gather …),
-    composed into the content as at the vertices."""
-    from .. import direct
-    from .. import receivers as receivers_mod
-    from ..solvers import SOLVERS
+@dataclass
+class Layout:
+    """A request's pages laid out (:func:`lay_out`). pages: per page (image name, UDIM tile or None,
+    objects, (width, height) texels, density texels/m, the LightmapObjects on it); uvs: {mesh:
+    float32[C,2] corner UVs within its page}; made: {mesh: float32[C,2]} the UVs laid out now, to
+    write (tile offsets in); densities: {object: (asked, used)} texels/m; sizes: {layout group:
+    {page index: (size, density)}}; warnings."""
 
-    settings, stages, scene, dev = problem.settings, problem.stages, problem.scene, problem.device
+    pages: list
+    uvs: dict
+    made: dict
+    densities: dict
+    sizes: dict
+    warnings: list
+
+
+def lay_out(request: LightmapRequest, problem) -> Layout:
+    """Group the objects of ``request`` into pages, unwrapping (xatlas, stage ``unwrap``) those
+    without reusable ``Lightmap`` UVs and sizing the pages of the others by their texel density."""
+    settings, stages, scene = problem.settings, problem.stages, problem.scene
     if not request.targets:
         raise BakeError("no object to lightmap")
     groups, warnings = _plan(request.targets, settings)
@@ -287,49 +297,43 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
             others = "" if settings.atlas_pages == "many" else " with the others"
             warnings.append(f"lightmap of {name}: {asked:g} texels/m would not fit {settings.max_size}² "
                             f"texels{others}: {used:.3g} texels/m used")
-    s = settings.supersample
+    return Layout(pages, uvs, made, densities, sizes, warnings)
 
-    def rasterize_all():
-        out = []
-        for _, _, _, (w, h), _, members in pages:
-            tri_uv = np.concatenate([uvs[m.mesh_name][m.corner_triangles] for m in members])
-            tri_scene = np.concatenate([np.arange(m.triangle_offset, m.triangle_offset
-                                                  + m.corner_triangles.shape[0]) for m in members])
-            texels = raster.rasterize(tri_uv, w * s, h * s, dev)
-            pos = scene.positions[scene.triangles[tri_scene]]
-            world = 0.5 * np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
-            q = tri_uv.astype(np.float64) * (w * s, h * s)
-            e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
-            uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-            metres = np.nan_to_num(np.sqrt(world / np.where(uv_area > 0, uv_area, np.inf)))
-            points, normals = raster.surface_points(texels, pos, scene.corner_normals[tri_scene],
-                                                    metres, problem)
-            out.append((texels, tri_scene[texels.triangle], points, normals, metres[texels.triangle]))
-        return out
 
-    rastered = stages.run("raster", rasterize_all)
-    cat = (lambda i: np.concatenate([r[i] for r in rastered]))
-    texel_receivers = receivers_mod.on_triangles(problem, cat(1), np.concatenate([r[0].bary for r in rastered]),
-                                                 cat(2), cat(3), cat(4).astype(np.float32))
-    if SOLVERS[settings.solver].light:
-        args = [problem, texel_receivers.points, texel_receivers.normals, texel_receivers.sizes]
-        if settings.texel_shadows == "adaptive":
-            lit_direct, rays = stages.run("texel direct", shadows.texel_direct, problem,
-                                          [r[0] for r in rastered], *args[1:],
-                                          stages.reporter("texel direct"))
-        else:
-            lit_direct, rays = stages.run("texel direct", direct.direct_lighting, *args,
-                                          stages.reporter("texel direct"))
-        problem.counts["rays"] += rays
-    else:  # AO needs no light
-        lit_direct = np.zeros((len(texel_receivers), 3), np.float32)
-    field_values = solver.evaluate(problem, solution, texel_receivers)
-    values = receivers_mod.compose(settings.baked_content, field_values, lit_direct, texel_receivers)
+def rasterize(layout: Layout, problem) -> list:
+    """Each page's texels (stage ``raster``): per page (``raster.Texels`` at ``supersample``² samples
+    per texel, int[N] scene triangle of each, float32[N,3] surface points and normals, float32[N]
+    metres per sample there)."""
+    scene, dev, s = problem.scene, problem.device, problem.settings.supersample
+    uvs = layout.uvs
+    out = []
+    for _, _, _, (w, h), _, members in layout.pages:
+        tri_uv = np.concatenate([uvs[m.mesh_name][m.corner_triangles] for m in members])
+        tri_scene = np.concatenate([np.arange(m.triangle_offset, m.triangle_offset
+                                              + m.corner_triangles.shape[0]) for m in members])
+        texels = raster.rasterize(tri_uv, w * s, h * s, dev)
+        pos = scene.positions[scene.triangles[tri_scene]]
+        world = 0.5 * np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
+        q = tri_uv.astype(np.float64) * (w * s, h * s)
+        e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
+        uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+        metres = np.nan_to_num(np.sqrt(world / np.where(uv_area > 0, uv_area, np.inf)))
+        points, normals = raster.surface_points(texels, pos, scene.corner_normals[tri_scene],
+                                                metres, problem)
+        out.append((texels, tri_scene[texels.triangle], points, normals, metres[texels.triangle]))
+    return out
 
-    def assemble():
+
+def assemble(layout: Layout, grids: list, values: np.ndarray, problem) -> LightmapResult:
+    """The pages of ``layout`` from float32[N,3] ``values`` at the texel samples of ``grids`` (each
+    page's ``raster.Texels``, in order): resolved, dilated into padding, seams measured (stage
+    ``dilate``)."""
+    settings, s = problem.settings, problem.settings.supersample
+    uvs = layout.uvs
+
+    def assemble_pages():
         out, start, seam_error = [], 0, 0.0
-        for (name, tile, objects, (w, h), density, members), r in zip(pages, rastered):
-            texels = r[0]
+        for (name, tile, objects, (w, h), density, members), texels in zip(layout.pages, grids):
             rgb, covered = _resolve(texels, values[start:start + texels.count], w, h, s)
             start += texels.count
             rgb = dilate(rgb, covered, settings.padding)
@@ -339,12 +343,12 @@ def bake_lightmaps(request: LightmapRequest, problem, solver, solution) -> Light
                     rgb, uvs[m.mesh_name], m.corner_triangles, problem.shading.corner[_triangles(m)]))
         return out, seam_error
 
-    result_pages, seam_error = stages.run("dilate", assemble)
-    for message in warnings:
-        stages.warn(message)
-    result = LightmapResult(pages=result_pages, uv=made, seam_error=seam_error,
-                          texels=int(sum(p.covered.sum() for p in result_pages)), warnings=warnings,
-                          densities=densities, sizes=sizes)
+    result_pages, seam_error = problem.stages.run("dilate", assemble_pages)
+    for message in layout.warnings:
+        problem.stages.warn(message)
+    result = LightmapResult(pages=result_pages, uv=layout.made, seam_error=seam_error,
+                            texels=int(sum(p.covered.sum() for p in result_pages)),
+                            warnings=layout.warnings, densities=layout.densities, sizes=layout.sizes)
     problem.counts["lightmap"] = result.report()
     return result
 

@@ -25,17 +25,20 @@ from dataclasses import dataclass
 class SolverInfo:
     """name: the ``--method`` value; description: one line for the UI; reads: the settings the
     solver reads beyond the common ones (the panel greys out the others); light: it transports
-    light (direct light is computed for it); indirect: it computes indirect light."""
+    light (direct light is computed for it); indirect: it computes indirect light; live: fast
+    enough for the live preview to follow the user's edits (others preview with ``PREVIEW``)."""
 
     name: str
     description: str
     reads: tuple = ()
     light: bool = True
     indirect: bool = True
+    live: bool = False
 
 
 SOLVERS = {info.name: info for info in (
-    SolverInfo("direct", "Lamps and emissive surfaces only, with shadows (fast)", indirect=False),
+    SolverInfo("direct", "Lamps and emissive surfaces only, with shadows (fast)", indirect=False,
+               live=True),
     SolverInfo("reference", "Direct light plus multi-bounce indirect light over all element pairs "
                "with ray-cast visibility (ground truth, small scenes)",
                reads=("visibility_rays", "bounces", "tolerance", "max_pairs", "texel_indirect")),
@@ -53,11 +56,13 @@ SOLVERS = {info.name: info for info in (
                reads=("visibility_rays", "bounces", "tolerance", "link_threshold", "link_memory",
                       "directional_bins", "texel_indirect")),
     SolverInfo("bunnell", "Direct light plus one bounce of indirect light gathered over a disk "
-               "hierarchy (fast, large scenes, approximate)", reads=("texel_indirect",)),
+               "hierarchy (fast, large scenes, approximate)", reads=("texel_indirect",), live=True),
     SolverInfo("ao", "Ambient occlusion: the unoccluded fraction of the hemisphere within the AO "
                "distance (what Cycles' AO bake gives)", reads=("ao_distance",), light=False,
-               indirect=False),
+               indirect=False, live=True),
 )}
+# The method the live preview uses for methods that are not ``live``.
+PREVIEW = "bunnell"
 
 
 def get(name: str):

@@ -34,10 +34,9 @@ from .. import device as device_mod
 from .. import links as links_mod
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet, Sampling, leaf_point, sample_leaf, sided_ff
-from ..problem import Surfels
 from ..rays import lift, visible
+from ..surfels import Surfels, fan_sample, point_ff
 from .base import Solution, exitance, iterate, reconstruct_with_detail
-from .reference import fan_sample, point_ff
 
 
 

@@ -44,7 +44,7 @@ from .. import links as links_mod
 from ..errors import BakeError
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet
-from ..problem import Surfels
+from ..surfels import Surfels
 from . import base
 from .base import Solution, iterate, reconstruct_with_detail
 from .hierarchical import transfer_at

@@ -3,10 +3,10 @@ ray-cast visibility (O(n²) pairs; the ground truth for small scenes).
 
 Transport ``M[i, j] = F_ij · V_ij``: F_ij the form factor from element i's point to the front face
 of element j (disk approximation far away, exact triangle form factors of j's fan, a third each,
-when d² < NEAR·A_j), V_ij the unblocked fraction of rays from i to jittered points of j's own
-triangles (the same for i→j and j→i, traced once). Then Jacobi sweeps ``I ← M (ρ ⊙ (D + I))`` on
-the device in lighting units (irradiance/π), D the direct lighting, until the largest change is
-below the tolerance.
+when d² < NEAR·A_j, ``core.surfels``), V_ij the unblocked fraction of rays from i to jittered
+points of j's own triangles (the same for i→j and j→i, traced once). Then Jacobi sweeps
+``I ← M (ρ ⊙ (D + I))`` on the device in lighting units (irradiance/π), D the direct lighting,
+until the largest change is below the tolerance.
 
 What is kept between sweeps depends on the memory budget (``max_pairs`` × 4 bytes): the whole
 float32 matrix when it fits (``matrix``), else the visibility of every pair as one byte
@@ -20,18 +20,11 @@ import warp as wp
 
 from .. import device as device_mod
 from ..errors import BakeError
-from ..formfactor import disk_ff, fan_ff
-from ..problem import Surfels
-from ..rays import lift
+from ..surfels import Surfels, element_ff, pair_hits
 from .base import Solution, exitance, iterate, reconstruct_with_detail
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
-# Below this many disk areas of squared distance the disk approximation is replaced by the
-# exact form factor of the sender's triangles. ALGORITHMS.md §1 suggests 4–8 for a fast method;
-# the reference pays ~50 % more time for 64, which keeps the perpendicular-squares form factor
-# within 0.4 % at 32×32 quads (8 gave 1.2 % low).
-NEAR = 64.0
 MATRIX, VISIBILITY, TRACED = 0, 1, 2
 MODES = ("matrix", "visibility", "traced")
 # Element pairs with their visibility traced per second and CPU thread (visibility_rays = 4),
@@ -40,89 +33,6 @@ PAIRS_PER_SECOND_PER_THREAD = 2.0e6
 CUDA_SPEEDUP = 50.0
 # A bake predicted to take longer than this (s) is announced with the pair count and the time.
 SLOW_SECONDS = 60.0
-
-
-@wp.func
-def fan_triangle(s: Surfels, j: int, u0: float) -> int:
-    """One of element j's triangles, chosen by area with u0 ∈ [0, 1)."""
-    total = float(0.0)
-    for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        total += _triangle_area2(s.points, s.tris, s.fan_triangles[k])
-    pick = u0 * total
-    chosen = s.fan_triangles[s.fan_offsets[j]]
-    for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
-        pick -= _triangle_area2(s.points, s.tris, s.fan_triangles[k])
-        if pick <= 0.0:
-            chosen = s.fan_triangles[k]
-            break
-    return chosen
-
-
-@wp.func
-def fan_sample(s: Surfels, j: int, u0: float, u1: float, u2: float) -> wp.vec3:
-    """A point of element j's own surface: on one of its triangles (chosen by area with u0), in the
-    half of it nearest to j's vertex. Points on the real surface, unlike the tangent disk, stay
-    inside a curved closed mesh."""
-    chosen = fan_triangle(s, j, u0)
-    a = s.points[s.tris[3 * chosen]]
-    b = s.points[s.tris[3 * chosen + 1]]
-    c = s.points[s.tris[3 * chosen + 2]]
-    r = wp.sqrt(u1)
-    q = a * (1.0 - r) + b * (r * (1.0 - u2)) + c * (r * u2)
-    pj = s.points[s.vertex[j]]
-    return pj + (q - pj) * 0.5
-
-
-@wp.func
-def _triangle_area2(points: wp.array(dtype=wp.vec3), tris: wp.array(dtype=wp.int32), t: int) -> float:
-    """Twice the area of triangle t (the arrays, not the Surfels struct: Warp copies structs)."""
-    a = points[tris[3 * t]]
-    return wp.length(wp.cross(points[tris[3 * t + 1]] - a, points[tris[3 * t + 2]] - a))
-
-
-@wp.func
-def element_ff(s: Surfels, i: int, j: int) -> float:
-    """Form factor from element i's point to the front of element j."""
-    return point_ff(s, s.pos[i], s.nrm[i], j)
-
-
-@wp.func
-def point_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int) -> float:
-    """Form factor from point p (unit normal n) to the front of element j: its disk far away, its
-    exact triangles when d² < NEAR·A_j."""
-    return face_ff(s, p, n, j, 1.0)
-
-
-@wp.func
-def face_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
-    """Form factor from point p (unit normal n) to one face of element j: the front for side 1,
-    the back for side −1 (what antiradiance leaves by); as ``point_ff``."""
-    d = s.pos[j] - p
-    if wp.dot(d, d) < NEAR * s.area[j]:
-        return fan_ff(p, n, j, side, s.fan_offsets, s.fan_triangles, s.tris, s.points)
-    return disk_ff(p, n, s.pos[j], s.nrm[j] * side, s.area[j])
-
-
-@wp.func
-def pair_hits(s: Surfels, i: int, j: int, rays: int, seed: int) -> int:
-    """Unblocked rays of ``rays`` from min(i,j)'s point to stratified points of the other's own
-    surface, both lifted off their surfaces. Seeded by the pair and always traced the same way
-    round, so every evaluation of a pair gives the same value."""
-    lo = wp.min(i, j)
-    hi = wp.max(i, j)
-    state = wp.rand_init(seed, lo * 65521 + hi)
-    origin = lift(s.pos[lo], s.nrm[lo], wp.sqrt(s.area[lo]))
-    hits = int(0)
-    for k in range(rays):
-        u0 = (float(k) + wp.randf(state)) / float(rays)
-        q = lift(fan_sample(s, hi, u0, wp.randf(state), wp.randf(state)), s.nrm[hi], wp.sqrt(s.area[hi]))
-        d = q - origin
-        dist = wp.length(d)
-        if dist <= 0.0:
-            hits += 1
-        elif not wp.mesh_query_ray_anyhit(s.mesh, origin, d / dist, dist * 0.9999):
-            hits += 1
-    return hits
 
 
 @wp.kernel

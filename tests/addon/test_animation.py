@@ -9,7 +9,8 @@ import pytest
 
 from radiosity_baker.addon import animation, cli
 from radiosity_baker.addon.job import BakeJob
-from radiosity_baker.core import BakeCancelled, Settings, metrics
+from radiosity_baker.core import BakeCancelled, Settings
+from harness import metrics
 
 from scenes import script, snapshot
 

@@ -11,8 +11,9 @@ from pathlib import Path
 import bpy
 import pytest
 
-from radiosity_baker.addon.compare import bake_vertex_values, stack
-from radiosity_baker.core import Settings, metrics
+from harness.compare import bake_vertex_values, stack
+from radiosity_baker.core import Settings
+from harness import metrics
 
 from test_reference_vs_cycles import receivers
 

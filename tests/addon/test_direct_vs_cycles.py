@@ -10,10 +10,11 @@ import bpy
 import numpy as np
 import pytest
 
-from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
+from harness.cycles import cycles_bake_vertex_colors
 from radiosity_baker.addon.extract import extract_scene
 from radiosity_baker.addon.write import write_color_attributes
-from radiosity_baker.core import Settings, bake, metrics
+from radiosity_baker.core import Settings, bake
+from harness import metrics
 
 import figures as figures_file
 

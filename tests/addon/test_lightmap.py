@@ -215,7 +215,7 @@ def test_an_atlas_of_several_pages_is_one_udim_image_each_object_on_one_tile(emp
                   max_size=64, padding=2, hookup="node")
     job = BakeJob(empty_scene.radiosity_baker.to_settings())
     warnings = job.run_sync(bpy.context)
-    pages = job.result.lightmap.pages
+    pages = job.result["lightmap"].pages
     tiles = [p.tile for p in pages]
     assert len(pages) > 1 and tiles == list(range(1001, 1001 + len(pages)))
     assert sorted(p.name for p in (tmp_path / "maps").iterdir()) == sorted(
@@ -236,7 +236,7 @@ def test_an_atlas_of_several_pages_is_one_udim_image_each_object_on_one_tile(emp
     # a rebake reuses the tiles' UVs as they are
     again = BakeJob(empty_scene.radiosity_baker.to_settings())
     again.run_sync(bpy.context)
-    assert [p.tile for p in again.result.lightmap.pages] == tiles and again.result.lightmap.uv == {}
+    assert [p.tile for p in again.result["lightmap"].pages] == tiles and again.result["lightmap"].uv == {}
 
 
 def test_cli_bakes_a_multi_page_atlas_and_reports_the_density_used(empty_scene, tmp_path):

@@ -19,9 +19,10 @@ import bpy
 import numpy as np
 import pytest
 
-from radiosity_baker.addon.cycles_ref import cycles_bake_image
+from harness.cycles import cycles_bake_image
 from radiosity_baker.addon.job import BakeJob
-from radiosity_baker.core import Settings, metrics
+from radiosity_baker.core import Settings
+from harness import metrics
 
 import figures as figures_file
 
@@ -86,7 +87,7 @@ def test_cornell_lightmap_matches_a_cycles_image_bake(tmp_path):
     job = BakeJob(settings, names)
     job.run_sync(bpy.context)
     seconds = time.perf_counter() - t0
-    page, = job.result.lightmap.pages
+    page, = job.result["lightmap"].pages
     w, h = page.size
 
     after = _user_state()
@@ -97,7 +98,7 @@ def test_cornell_lightmap_matches_a_cycles_image_bake(tmp_path):
     rebake = BakeJob(Settings(**{**settings.as_dict(), "texel_indirect": "interpolate", "reunwrap": True,
                                  "output": str(tmp_path / "interpolated")}), names)
     rebake.run_sync(bpy.context)
-    interpolated, = rebake.result.lightmap.pages
+    interpolated, = rebake.result["lightmap"].pages
     assert interpolated.size == page.size
 
     reference = cycles_bake_image(names, "Lightmap", w, h, samples=CYCLES_SAMPLES)

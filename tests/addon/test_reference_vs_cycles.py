@@ -12,9 +12,10 @@ from pathlib import Path
 import bpy
 import pytest
 
-from radiosity_baker.addon.compare import bake_vertex_values, stack
-from radiosity_baker.addon.cycles_ref import cycles_bake_vertex_colors
-from radiosity_baker.core import Settings, metrics
+from harness.compare import bake_vertex_values, stack
+from harness.cycles import cycles_bake_vertex_colors
+from radiosity_baker.core import Settings
+from harness import metrics
 
 import figures as figures_file
 

@@ -4,7 +4,7 @@ import bpy
 import numpy as np
 import pytest
 
-from radiosity_baker.core import metrics
+from harness import metrics
 
 from scenes import GROUND, OCCLUDER, fast_settings, lit_ground, vertex_colors
 

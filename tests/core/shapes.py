@@ -3,7 +3,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from radiosity_baker.core import targets
 from radiosity_baker.core.scene import Lamps, SceneData
+
+
+def with_lightmap(request) -> list:
+    """The targets of a bake into the shading vertices and the lightmaps of ``request``."""
+    return [targets.make("vertices"), targets.make("lightmap", request)]
 
 
 def grid(size: float, n: int, z: float = 0.0, flip: bool = False):

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake, metrics
+from radiosity_baker.core import Settings, bake
+from harness import metrics
 from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.solvers import antiradiance, reference
 
@@ -169,7 +170,7 @@ def test_lightmap_texels_come_from_the_solution_through_evaluate(tmp_path, metho
     scene = shadow_scene(4)
     common = dict(method=method, content="indirect", device="cpu", texel_density=12.0, light_samples=4)
     pages = {mode: bake(scene, Settings(texel_indirect=mode, **common),
-                        lightmap=LightmapRequest([floor_target(scene)], cache_dir=tmp_path)).lightmap.pages[0]
+                        targets=shapes.with_lightmap(LightmapRequest([floor_target(scene)], cache_dir=tmp_path)))["lightmap"].pages[0]
              for mode in ("gather", "interpolate")}
     gather, interp = pages["gather"], pages["interpolate"]
     covered = gather.covered

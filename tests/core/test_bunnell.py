@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake, metrics
+from radiosity_baker.core import Settings, bake
+from harness import metrics
 from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.scene import LAMP_POINT
 from radiosity_baker.core.solvers import bunnell, reference

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake, metrics
+from radiosity_baker.core import Settings, bake
+from harness import metrics
 from radiosity_baker.core.scene import LAMP_POINT, LAMP_SUN, Lamps
 
 TOLERANCE = 0.005  # relative RMSE and bias against the bake at the origin

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake, metrics
-from radiosity_baker.core.lightmap import LightmapRequest, LightmapTarget
+from radiosity_baker.core import Settings, bake
+from harness import metrics
+from radiosity_baker.core.lightmap import LightmapRequest, LightmapObject
 from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.scene import LAMP_POINT, LAMP_SUN, SceneData, Lamps
 from radiosity_baker.core.solvers import hierarchical
@@ -96,7 +97,7 @@ def shadow_scene(floor_quads):
 
 def floor_target(scene):
     t = int((scene.tri_object == 0).sum())
-    return LightmapTarget("part0", "part0", corner_vert=scene.triangles[:t].ravel().astype(np.int32),
+    return LightmapObject("part0", "part0", corner_vert=scene.triangles[:t].ravel().astype(np.int32),
                           corner_triangles=np.arange(3 * t, dtype=np.int32).reshape(t, 3), triangle_offset=0)
 
 
@@ -110,8 +111,8 @@ def test_lightmap_texels_show_the_indirect_shadow_of_a_small_block(tmp_path):
     pages = {}
     for mode in ("gather", "interpolate"):
         r = bake(scene, Settings(texel_indirect=mode, **common),
-                 lightmap=LightmapRequest([floor_target(scene)], cache_dir=tmp_path))
-        pages[mode] = r.lightmap.pages[0]
+                 targets=shapes.with_lightmap(LightmapRequest([floor_target(scene)], cache_dir=tmp_path)))
+        pages[mode] = r["lightmap"].pages[0]
     gather, interp = pages["gather"], pages["interpolate"]
     covered = gather.covered
     assert np.isfinite(gather.rgb[covered]).all() and (gather.rgb[covered] >= 0).all()

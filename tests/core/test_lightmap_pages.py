@@ -3,20 +3,21 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake, metrics
-from radiosity_baker.core.lightmap import LightmapRequest, LightmapTarget, files
+from radiosity_baker.core import Settings, bake
+from harness import metrics
+from radiosity_baker.core.lightmap import LightmapRequest, LightmapObject, files
 from radiosity_baker.core.lightmap.pages import bilinear, dilate
 from radiosity_baker.core.scene import LAMP_POINT
 
 
 def _targets(sc, parts, names=None, mesh_names=None, corner_uv=None):
-    """A LightmapTarget per part of a shapes.scene (each triangle corner its own face corner)."""
+    """A LightmapObject per part of a shapes.scene (each triangle corner its own face corner)."""
     out, t0 = [], 0
     for k, part in enumerate(parts):
         nt = part[2].shape[0]
         vertex = sc.triangles[t0:t0 + nt].ravel().astype(np.int32)
         name = names[k] if names else f"part{k}"
-        out.append(LightmapTarget(name, mesh_names[k] if mesh_names else name,
+        out.append(LightmapObject(name, mesh_names[k] if mesh_names else name,
                                   corner_vert=(vertex - vertex.min()).astype(np.int32),
                                   corner_triangles=np.arange(3 * nt, dtype=np.int32).reshape(nt, 3),
                                   triangle_offset=t0,
@@ -52,18 +53,18 @@ def room_bake(tmp_path_factory):
     settings = Settings(method="reference", light_samples=1, visibility_rays=4, texel_density=24.0,
                         padding=3, device="cpu", texel_indirect="interpolate")
     request = LightmapRequest(_targets(sc, parts), cache_dir=tmp_path_factory.mktemp("cache"))
-    return sc, parts, bake(sc, settings, lightmap=request)
+    return sc, parts, bake(sc, settings, targets=shapes.with_lightmap(request))
 
 
 def test_lightmap_matches_the_per_vertex_solution_at_the_vertices(room_bake):
     sc, parts, r = room_bake
-    page, = r.lightmap.pages
+    page, = r["lightmap"].pages
     assert page.objects == ["part0", "part1"] and r.counts["texels"] == page.covered.sum()
     assert {"unwrap", "raster", "texel direct"} <= set(r.timings)
     assert r.indirect.max() > 0.05 * r.lighting.max()  # the wall and floor light each other
     for k, name in enumerate(page.objects):
         target = _targets(sc, parts)[k]
-        at_vertices = bilinear(page.rgb, r.lightmap.uv[name])
+        at_vertices = bilinear(page.rgb, r["lightmap"].uv[name])
         expected = _corner_values(r, target)
         error = np.abs(at_vertices - expected).max() / expected.max()
         assert error < 0.01, (name, error)
@@ -71,7 +72,7 @@ def test_lightmap_matches_the_per_vertex_solution_at_the_vertices(room_bake):
 
 def test_every_covered_texel_is_finite_and_non_negative_and_padding_is_filled(room_bake):
     _, _, r = room_bake
-    page, = r.lightmap.pages
+    page, = r["lightmap"].pages
     assert np.isfinite(page.rgb).all() and (page.rgb >= 0).all()
     lit = page.rgb.max(axis=2) > 0
     assert page.covered.any() and (lit | ~page.covered).all()
@@ -91,7 +92,7 @@ def test_combined_is_emission_plus_albedo_times_lighting_per_texel(tmp_path):
     pages = {}
     for content in ("lighting", "combined"):
         req = LightmapRequest(_targets(sc, parts)[:1], cache_dir=tmp_path)
-        pages[content] = bake(sc, Settings(content=content, **common), lightmap=req).lightmap.pages[0]
+        pages[content] = bake(sc, Settings(content=content, **common), targets=shapes.with_lightmap(req))["lightmap"].pages[0]
     cov = pages["lighting"].covered
     np.testing.assert_allclose(pages["combined"].rgb[cov], pages["lighting"].rgb[cov] * (0.8, 0.6, 0.4),
                                rtol=1e-5, atol=1e-7)
@@ -134,9 +135,9 @@ def test_both_sides_of_smooth_uv_seams_agree(tmp_path):
     parts = [(p, n, t, (0.5,) * 3, (0,) * 3)]
     sc = shapes.scene(parts, shapes.lamp(LAMP_POINT, (0.0, 0.4, 1.5), power=(100.0,) * 3))
     settings = Settings(method="direct", light_samples=1, texel_density=64.0, device="cpu")
-    r = bake(sc, settings, lightmap=LightmapRequest(_targets(sc, parts), cache_dir=tmp_path))
-    print(f"largest seam difference: {r.lightmap.seam_error:.4f} of the brightest texel")
-    assert 0.0 < r.lightmap.seam_error < SEAM_BOUND
+    r = bake(sc, settings, targets=shapes.with_lightmap(LightmapRequest(_targets(sc, parts), cache_dir=tmp_path)))
+    print(f"largest seam difference: {r['lightmap'].seam_error:.4f} of the brightest texel")
+    assert 0.0 < r["lightmap"].seam_error < SEAM_BOUND
 
 
 def test_layouts_shared_meshes_and_reused_uvs(tmp_path):
@@ -144,29 +145,29 @@ def test_layouts_shared_meshes_and_reused_uvs(tmp_path):
     common = dict(method="direct", light_samples=1, texel_density=16.0, device="cpu")
     # two objects sharing one mesh: in an atlas only the first, per object one page each
     shared = _targets(sc, parts[:1], names=["A"]) + _targets(sc, parts[:1], names=["B"], mesh_names=["A"])
-    r = bake(sc, Settings(**common), lightmap=LightmapRequest(shared, cache_dir=tmp_path))
-    assert [p.objects for p in r.lightmap.pages] == [["A"]]
+    r = bake(sc, Settings(**common), targets=shapes.with_lightmap(LightmapRequest(shared, cache_dir=tmp_path)))
+    assert [p.objects for p in r["lightmap"].pages] == [["A"]]
     assert any("shared by A, B" in w for w in r.warnings)
     r = bake(sc, Settings(layout="per_object", **common),
-             lightmap=LightmapRequest(shared, cache_dir=tmp_path))
-    assert [p.name for p in r.lightmap.pages] == ["Lightmap_A", "Lightmap_B"]
-    assert list(r.lightmap.uv) == ["A"]
-    np.testing.assert_array_equal(r.lightmap.pages[0].rgb, r.lightmap.pages[1].rgb)
+             targets=shapes.with_lightmap(LightmapRequest(shared, cache_dir=tmp_path)))
+    assert [p.name for p in r["lightmap"].pages] == ["Lightmap_A", "Lightmap_B"]
+    assert list(r["lightmap"].uv) == ["A"]
+    np.testing.assert_array_equal(r["lightmap"].pages[0].rgb, r["lightmap"].pages[1].rgb)
     # existing UVs are kept (nothing new to write) and sized by the density
-    uv = r.lightmap.uv["A"]
+    uv = r["lightmap"].uv["A"]
     kept = _targets(sc, parts[:1], corner_uv=[uv])
-    r2 = bake(sc, Settings(**common), lightmap=LightmapRequest(kept, cache_dir=tmp_path))
-    assert r2.lightmap.uv == {} and r2.lightmap.pages[0].name == "Lightmap"
-    assert abs(r2.lightmap.pages[0].density - 16.0) / 16.0 < 0.15
-    r3 = bake(sc, Settings(reunwrap=True, **common), lightmap=LightmapRequest(kept, cache_dir=tmp_path))
-    assert list(r3.lightmap.uv) == ["part0"]
+    r2 = bake(sc, Settings(**common), targets=shapes.with_lightmap(LightmapRequest(kept, cache_dir=tmp_path)))
+    assert r2["lightmap"].uv == {} and r2["lightmap"].pages[0].name == "Lightmap"
+    assert abs(r2["lightmap"].pages[0].density - 16.0) / 16.0 < 0.15
+    r3 = bake(sc, Settings(reunwrap=True, **common), targets=shapes.with_lightmap(LightmapRequest(kept, cache_dir=tmp_path)))
+    assert list(r3["lightmap"].uv) == ["part0"]
 
 
 def test_supersampling_keeps_the_page_and_the_values(tmp_path):
     sc, parts = _room()
     common = dict(method="direct", light_samples=1, texel_density=16.0, device="cpu")
     pages = [bake(sc, Settings(supersample=s, **common),
-                  lightmap=LightmapRequest(_targets(sc, parts)[:1], cache_dir=tmp_path)).lightmap.pages[0]
+                  targets=shapes.with_lightmap(LightmapRequest(_targets(sc, parts)[:1], cache_dir=tmp_path)))["lightmap"].pages[0]
              for s in (1, 3)]
     assert pages[0].size == pages[1].size
     inner = pages[0].covered & pages[1].covered
@@ -177,13 +178,13 @@ def test_supersampling_keeps_the_page_and_the_values(tmp_path):
 def test_ao_lightmap_matches_per_vertex_ao_at_the_vertices(tmp_path):
     sc, parts = _room()
     settings = Settings(method="direct", content="ao", ao_distance=1.0, texel_density=16.0, device="cpu")
-    r = bake(sc, settings, lightmap=LightmapRequest(_targets(sc, parts), cache_dir=tmp_path))
-    page, = r.lightmap.pages
+    r = bake(sc, settings, targets=shapes.with_lightmap(LightmapRequest(_targets(sc, parts), cache_dir=tmp_path)))
+    page, = r["lightmap"].pages
     assert "texel ao" in r.timings and "texel direct" not in r.timings
     cov = page.rgb[page.covered]
     assert (cov >= 0).all() and (cov <= 1.0 + 1e-5).all() and cov.min() < 0.9
     target = _targets(sc, parts)[0]
-    at_vertices = bilinear(page.rgb, r.lightmap.uv["part0"])
+    at_vertices = bilinear(page.rgb, r["lightmap"].uv["part0"])
     error = np.abs(at_vertices - _corner_values(r, target))
     # AO falls to 0.5 in the crease where floor meets wall, within a texel: vertices on the crease
     # differ most from the texel centres next to it.
@@ -233,11 +234,11 @@ def test_final_gather_brings_indirect_detail_finer_than_the_mesh_into_texels(tmp
     errors = {}
     for mode in ("interpolate", "gather"):
         s = Settings(**{**settings.as_dict(), "texel_indirect": mode, "target": "lightmap"})
-        r = bake(coarse, s, lightmap=LightmapRequest(_targets(coarse, parts),
-                                                     cache_dir=tmp_path / "cache"))
+        r = bake(coarse, s, targets=shapes.with_lightmap(LightmapRequest(_targets(coarse, parts),
+                                                     cache_dir=tmp_path / "cache")))
         assert ("texel gather" in r.timings) == (mode == "gather")
-        page, = r.lightmap.pages
-        ours = _floor_texels_at(points, parts[0][0], parts[0][2], page, r.lightmap.uv["part0"])
+        page, = r["lightmap"].pages
+        ours = _floor_texels_at(points, parts[0][0], parts[0][2], page, r["lightmap"].uv["part0"])
         errors[mode] = metrics.relative_rmse(ours, truth)
     print(f"\nfloor indirect vs the fine reference, relative RMSE: {errors}")
     assert errors["interpolate"] > 0.1  # the coarse mesh really misses it
@@ -261,7 +262,7 @@ def _crates(count=6):
     for k in range(count):
         tri = sc.triangles[t0:t0 + per_box]
         corner_vert = tri.ravel() - tri.min()
-        targets.append(LightmapTarget(f"crate{k}", f"crate{k}", corner_vert=corner_vert.astype(np.int32),
+        targets.append(LightmapObject(f"crate{k}", f"crate{k}", corner_vert=corner_vert.astype(np.int32),
                                       corner_triangles=np.arange(3 * per_box, dtype=np.int32).reshape(-1, 3),
                                       triangle_offset=t0))
         t0 += per_box
@@ -273,8 +274,8 @@ def test_an_atlas_too_large_for_one_page_becomes_a_udim_tile_set_each_object_on_
     targets[1].density = 36.0  # an object with its own density
     settings = Settings(method="direct", light_samples=1, texel_density=30.0, max_size=128, padding=2,
                         device="cpu")
-    r = bake(sc, settings, lightmap=LightmapRequest(targets, cache_dir=tmp_path))
-    pages = r.lightmap.pages
+    r = bake(sc, settings, targets=shapes.with_lightmap(LightmapRequest(targets, cache_dir=tmp_path)))
+    pages = r["lightmap"].pages
     assert len(pages) > 1 and {p.name for p in pages} == {"Lightmap"}
     assert [p.tile for p in pages] == list(range(1001, 1001 + len(pages)))
     assert [p.stem for p in pages][:2] == ["Lightmap.1001", "Lightmap.1002"]
@@ -282,7 +283,7 @@ def test_an_atlas_too_large_for_one_page_becomes_a_udim_tile_set_each_object_on_
     for page in pages:
         assert page.size == (128, 128)
         for name in page.objects:  # its UVs lie in its tile: u in [k, k + 1)
-            uv = r.lightmap.uv[name]
+            uv = r["lightmap"].uv[name]
             assert np.floor(uv[:, 0].min()) == np.floor(uv[:, 0].max() - 1e-6) == page.tile - 1001
             assert 0.0 <= uv[:, 1].min() and uv[:, 1].max() <= 1.0
         assert page.covered.any() and (page.rgb[page.covered] > 0).any()
@@ -296,8 +297,8 @@ def test_one_page_lowers_the_density_and_says_so(tmp_path):
     sc, targets = _crates()
     settings = Settings(method="direct", light_samples=1, texel_density=32.0, max_size=128, padding=2,
                         atlas_pages="one", device="cpu")
-    r = bake(sc, settings, lightmap=LightmapRequest(targets, cache_dir=tmp_path))
-    page, = r.lightmap.pages
+    r = bake(sc, settings, targets=shapes.with_lightmap(LightmapRequest(targets, cache_dir=tmp_path)))
+    page, = r["lightmap"].pages
     assert page.tile is None and max(page.size) <= 128 and page.density < 32.0
     assert {d["note"] for d in r.counts["lightmap"]["density"].values()} == {"lowered"}
     assert any("would not fit 128² texels with the others" in w for w in r.warnings)

@@ -5,7 +5,7 @@ import pytest
 
 import shapes
 from radiosity_baker.core import Settings, bake
-from radiosity_baker.core.lightmap import LightmapRequest, LightmapTarget
+from radiosity_baker.core.lightmap import LightmapRequest, LightmapObject
 from radiosity_baker.core.scene import LAMP_AREA, LAMP_POINT
 
 
@@ -16,7 +16,7 @@ def _floor_under_a_box(lamp, occluder=True):
     parts = [(fp, fn, ft, (0.5,) * 3, (0,) * 3), (op, on, ot, (0.5,) * 3, (0,) * 3)]
     sc = shapes.scene(parts[:2 if occluder else 1], lamp)
     nt = ft.shape[0]
-    target = LightmapTarget("floor", "floor", corner_vert=ft.ravel().astype(np.int32),
+    target = LightmapObject("floor", "floor", corner_vert=ft.ravel().astype(np.int32),
                             corner_triangles=np.arange(3 * nt, dtype=np.int32).reshape(nt, 3),
                             triangle_offset=0)
     return sc, target
@@ -24,8 +24,8 @@ def _floor_under_a_box(lamp, occluder=True):
 
 def _bake(sc, target, cache, **settings):
     s = Settings(**{**dict(method="direct", texel_density=40.0, padding=2, device="cpu"), **settings})
-    r = bake(sc, s, lightmap=LightmapRequest([target], cache_dir=cache))
-    return r.lightmap.pages[0], r.counts["rays"] - r.counts["elements"] * s.light_samples
+    r = bake(sc, s, targets=shapes.with_lightmap(LightmapRequest([target], cache_dir=cache)))
+    return r["lightmap"].pages[0], r.counts["rays"] - r.counts["elements"] * s.light_samples
 
 
 @pytest.mark.parametrize("lamp", [

@@ -9,7 +9,7 @@ import pytest
 
 import shapes
 from radiosity_baker.core import Settings, bake, pipeline
-from radiosity_baker.core.lightmap import LightmapRequest, LightmapTarget
+from radiosity_baker.core.lightmap import LightmapRequest, LightmapObject
 from radiosity_baker.core.scene import LAMP_POINT
 from radiosity_baker.core.solvers import SOLVERS, SolverInfo, base
 
@@ -40,15 +40,15 @@ def constant_solver(monkeypatch):
 
 def test_a_new_solver_is_one_module_and_one_registry_line(constant_solver, tmp_path):
     scene, nt = lit_floor()
-    target = LightmapTarget("part0", "part0", corner_vert=scene.triangles.ravel().astype(np.int32),
+    target = LightmapObject("part0", "part0", corner_vert=scene.triangles.ravel().astype(np.int32),
                             corner_triangles=np.arange(3 * nt, dtype=np.int32).reshape(nt, 3),
                             triangle_offset=0)
     r = bake(scene, Settings(method="constant", content="combined", device="cpu", texel_density=8.0),
-             lightmap=LightmapRequest([target], cache_dir=tmp_path))
+             targets=shapes.with_lightmap(LightmapRequest([target], cache_dir=tmp_path)))
     direct = bake(scene, Settings(method="direct", device="cpu"))
     np.testing.assert_allclose(r.indirect, 0.25)
     np.testing.assert_allclose(r.output, np.array([0.5, 0.4, 0.3]) * (direct.lighting + 0.25), rtol=1e-5)
-    page, = r.lightmap.pages
+    page, = r["lightmap"].pages
     assert page.rgb[page.covered].min() >= 0.3 * 0.25  # every texel got the bounce too
 
 

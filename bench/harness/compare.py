@@ -10,9 +10,9 @@ import time
 import bpy
 import numpy as np
 
-from ..core import Settings, bake
-from .extract import extract_scene
-from .write import _per_vertex
+from radiosity_baker.addon.extract import extract_scene
+from radiosity_baker.addon.write import _per_vertex
+from radiosity_baker.core import Settings, bake
 
 
 def bake_vertex_values(object_names, settings: Settings):

@@ -12,7 +12,7 @@ import contextlib
 import bpy
 import numpy as np
 
-from .temporary import temporarily
+from radiosity_baker.addon.temporary import temporarily
 
 BAKE_TYPES = ("DIFFUSE", "AO")
 
