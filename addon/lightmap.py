@@ -21,9 +21,9 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core.lightmap import LightmapRequest, LightmapTarget, files
+from ..core.lightmap import ATLAS_NAME, LightmapRequest, LightmapTarget, files
 from .extract import ExtractionError
-from .outputs import OutputError, Staging, check_folder
+from .outputs import OutputError, Staging, check_folder, same_file
 from .write import name_clash
 
 UV_NAME = "Lightmap"
@@ -269,6 +269,15 @@ def _write_uv(me, uv: np.ndarray) -> None:
     if render is not None:
         layers[render].active_render = True
     me.update()
+
+
+def may_replace(folder: Path, path: Path) -> bool:
+    """Whether a lightmap bake into ``folder`` may replace the file ``path``: its folder is
+    ``folder`` and its name one that lightmap files take (``Lightmap….exr`` / ``.png``: pages,
+    tiles and frames alike), compared without case (for case-insensitive file systems)."""
+    name = path.name.lower()
+    return (name.startswith(ATLAS_NAME.lower()) and path.suffix.lower() in (".exr", ".png")
+            and same_file(path.parent, folder))
 
 
 def _file_stem(page) -> str:

@@ -41,6 +41,18 @@ def _reason(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
 
+def same_file(a: Path, b: Path) -> bool:
+    """Whether paths ``a`` and ``b`` name one file: the same after resolving links, ``.`` and
+    ``..``, or (where both exist) the same device and inode, which also catches another spelling
+    of the name on a case-insensitive file system."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return False
+
+
 def check_folder(folder: Path, target=None) -> None:
     """Raise OutputError unless files can be created in ``folder``: missing folders are made, a file
     is created in it and everything is removed again, so the check leaves nothing behind (creating a

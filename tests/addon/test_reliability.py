@@ -197,6 +197,45 @@ def test_unwritable_outputs_are_exit_2_before_baking(blend, tmp_path, capsys, op
     fails(capsys, tmp_path, blend, 2, [str(target)], *FAST, *extra, option, target, started=False)
 
 
+@pytest.mark.parametrize("option", ["--report", "--preview"])
+@pytest.mark.parametrize("spelling", ["same", "relative", "dot-dot", "symlink", "hard link"])
+def test_an_output_naming_the_input_is_exit_2_and_leaves_it_alone(blend, tmp_path, capsys,
+                                                                 monkeypatch, option, spelling):
+    monkeypatch.chdir(tmp_path)
+    target = {"same": str(blend), "relative": f"./{blend.name}",
+              "dot-dot": f"{tmp_path}/missing/../{blend.name}",
+              "symlink": tmp_path / "link.blend", "hard link": tmp_path / "hard.blend"}[spelling]
+    if spelling == "symlink":
+        target.symlink_to(blend)
+    elif spelling == "hard link":
+        os.link(blend, target)
+    fails(capsys, tmp_path, blend, 2, [option, str(Path(target)), "input"], *FAST, option, target,
+          started=False)
+
+
+def test_two_outputs_naming_one_file_through_a_link_are_exit_2(blend, tmp_path, capsys):
+    (tmp_path / "report.json").write_text("{}")
+    (tmp_path / "alias.json").symlink_to(tmp_path / "report.json")
+    fails(capsys, tmp_path, blend, 2, ["--report", "--preview"], *FAST, "--report",
+          tmp_path / "report.json", "--preview", tmp_path / "alias.json", started=False)
+
+
+@pytest.mark.parametrize("option, name", [("--report", "Lightmap.png"), ("--preview", "lightmap.PNG"),
+                                          ("--save", "Lightmap_Ground.exr")])
+def test_an_output_a_lightmap_file_would_replace_is_exit_2(blend, tmp_path, capsys, option, name):
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    fails(capsys, tmp_path, blend, 2, [option, str(maps / name), "lightmap"], *FAST, *LIGHTMAP,
+          "--output", maps, option, maps / name, started=False)
+
+
+def test_an_input_in_the_lightmap_folder_under_a_lightmap_name_is_exit_2(blend, tmp_path, capsys):
+    inside = tmp_path / "Lightmap.exr"
+    inside.write_bytes(blend.read_bytes())
+    fails(capsys, tmp_path, inside, 2, [str(inside), "input"], *FAST, *LIGHTMAP, "--output", tmp_path,
+          started=False)
+
+
 def test_a_mesh_with_eight_uv_maps_is_an_error_naming_it(blend, tmp_path, capsys):
     for i in range(7):
         bpy.data.objects[GROUND].data.uv_layers.new(name=f"UV{i}")
