@@ -21,7 +21,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core.lightmap import ATLAS_NAME, LightmapRequest, LightmapTarget, files
+from ..core.lightmap import ATLAS_NAME, LightmapRequest, LightmapTarget, budget, files
 from .extract import ExtractionError
 from .outputs import OutputError, Staging, check_folder, same_file
 from .write import name_clash
@@ -137,6 +137,7 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
             density=object_density(ob)))
     if not targets:
         raise ExtractionError("no object can be lightmapped" + (f": {warnings[-1]}" if warnings else ""))
+    budget.check(targets, extraction.scene, settings)  # pages too large for memory: stop now
     return LightmapRequest(targets, python=python_executable(), cache_dir=_cache_dir()), warnings
 
 

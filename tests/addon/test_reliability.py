@@ -236,6 +236,16 @@ def test_an_input_in_the_lightmap_folder_under_a_lightmap_name_is_exit_2(blend, 
           started=False)
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--max-size", "100000"], ["--max-size", "16384"]),
+    (["--max-size", "16384", "--texel-density", "100000", "--supersample", "8"],
+     ["million texels", "GB", "texel density of"])])
+def test_lightmap_pages_beyond_engines_or_memory_are_exit_2_before_baking(blend, tmp_path, capsys,
+                                                                         argv, words):
+    fails(capsys, tmp_path, blend, 2, words, *FAST, *LIGHTMAP, "--output", tmp_path / "maps", *argv,
+          started=False)
+
+
 def test_a_mesh_with_eight_uv_maps_is_an_error_naming_it(blend, tmp_path, capsys):
     for i in range(7):
         bpy.data.objects[GROUND].data.uv_layers.new(name=f"UV{i}")
