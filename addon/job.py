@@ -136,13 +136,14 @@ class BakeJob:
 
     def _write(self, context) -> list[str]:
         t0 = time.perf_counter()
+        self._on_progress("write", 0.0)
         # Every check first (objects resolved by name, names free): a failure writes nothing.
         colors = maps = None
         if self.settings.target in ("vertex_colors", "both"):
             if self.animation:
                 colors = animation.prepare([(f, ex, r.output) for f, ex, r in self._baked],
                                            self.settings.attribute, self.settings, self._frame_now,
-                                           context)
+                                           context, lambda fraction: self._on_progress("write", fraction))
             else:
                 colors = write.prepare_color_attributes(self.extraction, self.result.output,
                                                         self.settings.attribute, self.settings, context)
@@ -162,6 +163,7 @@ class BakeJob:
             self.warnings += colors.apply(context)
         if maps is not None:
             self.warnings += maps.apply(result, self.lightmap_files, self.settings, sequence)
+        self._on_progress("write", 1.0)
         self.timings["write"] = time.perf_counter() - t0
         self.seconds = time.perf_counter() - self._t0
         if hasattr(context.scene, "radiosity_baker"):  # the CLI may run without the add-on registered
@@ -219,6 +221,8 @@ class BakeJob:
                           for f in [self._frame, *self._todo]]
             for name in names:
                 write.check_color_attributes(self.extraction, name, self.settings, context)
+            if self.animation:
+                self._warn(animation.cache_warning(self.extraction, len(names) - 1))
         if self.settings.target in ("lightmap", "both"):
             lightmap.output_folder(self.settings)  # an unwritable folder fails before baking
             request, warnings = lightmap.request(self.extraction, self.settings)
@@ -279,6 +283,13 @@ class BakeJob:
         if self._staging is not None:
             self._staging.__exit__(None, None, None)  # removes what was staged
             self._staging = None
+
+    def _warn(self, message: Optional[str]) -> None:
+        """Keep a warning (None: none) and tell it now, before the bake runs."""
+        if message is not None and message not in self.warnings:
+            self.warnings.append(message)
+            if self._notify is not None:
+                self._notify(message)
 
     def _on_progress(self, stage: str, fraction: float) -> None:
         with self._lock:
