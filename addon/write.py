@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from .extract import Extraction, TargetMesh, realize_copy
+from .extract import Extraction, ExtractionError, TargetMesh, realize_copy
 from .outputs import OutputError
 
 
@@ -92,7 +92,8 @@ class ColorWrites:
 def _resolve(extraction: Extraction, attribute_name: str, settings, context):
     """(target, its object, whether it is written into a copy) per target written, and warnings.
 
-    Raises OutputError for a reserved name, a vanished or changed object, or a name clash.
+    Raises OutputError for a reserved name, a vanished or changed object, or a name clash;
+    ExtractionError when every target is skipped (linked from a library, topology changed).
     """
     check_attribute_name(attribute_name)
     warnings: list[str] = []
@@ -125,6 +126,9 @@ def _resolve(extraction: Extraction, attribute_name: str, settings, context):
                               f"{attribute_name!r}, which a color attribute cannot replace: choose "
                               f"another attribute name")
         out.append((target, ob, target.topology_changed))
+    if extraction.targets and not out:  # a bake that writes nothing is no success
+        more = f" (and {len(warnings) - 1} more)" if len(warnings) > 1 else ""
+        raise ExtractionError(f"nothing to write: {warnings[0]}{more}")
     return out, warnings
 
 

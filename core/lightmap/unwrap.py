@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -26,7 +27,7 @@ from ..errors import BakeError
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
-_CACHE_VERSION = b"rb-unwrap-5"
+_CACHE_VERSION = b"rb-unwrap-6"
 
 
 @dataclass
@@ -127,16 +128,17 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
     charts = _cached(cache_dir, "c", jobs, lambda todo: _run(
         "charts", todo, {"padding": np.array(int(padding)), "max_size": np.array(int(max_size))}, python,
         cache_dir))
-    packs = {}
-    for keys in chart_keys:
+    packs, names = {}, {}
+    for group, keys in zip(groups, chart_keys):
         packs[_key(*keys, int(max_size), int(padding), bool(many))] = keys
+        names[_key(*keys, int(max_size), int(padding), bool(many))] = [mesh.name for mesh in group]
     options = {"max_size": np.array(int(max_size)), "padding": np.array(int(padding)),
                "many": np.array(int(bool(many)))}
     pack_jobs = {key: {f"m{m}_{name}": charts[k][name] for m, k in enumerate(keys)
                        for name in ("uv", "idx", "chart", "density")} | {"meshes": np.array(len(keys))}
                  for key, keys in packs.items()}
     packed = _cached(cache_dir, "p", pack_jobs, lambda todo: _run("pack", todo, options, python, cache_dir,
-                                                                  whole=True))
+                                                                  names=names))
     layouts = []
     for group, items, keys in zip(groups, cleaned, chart_keys):
         data = packed[_key(*keys, int(max_size), int(padding), bool(many))]
@@ -184,9 +186,28 @@ def _uv_areas(tri_uv: np.ndarray) -> np.ndarray:
         return np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0
 
 
-def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path, whole: bool = False) -> dict:
+def _failure(stderr: str, returncode: int, members: list, keys: list, names: Optional[dict]) -> str:
+    """The message of a worker that failed: its last line on stderr (``failed: job J mesh M:
+    why`` names the mesh, see ``_xatlas_worker.main``: the object is named when ``names`` gives
+    the meshes of each group job), else its exit status."""
+    last = (stderr.strip().splitlines() or [f"exit status {returncode}"])[-1]
+    match = re.fullmatch(r"failed: job (\d+) mesh (-?\d+): (.*)", last)
+    if match is None:
+        return f"UV unwrapping (xatlas) failed: {last}"
+    job, mesh, why = int(match[1]), int(match[2]), match[3]
+    if names is None:
+        return f"UV unwrapping (xatlas) failed: {why}"
+    group = names[keys[members[job]]]
+    who = group[mesh] if mesh >= 0 else ", ".join(group)
+    return f"UV unwrapping (xatlas) failed for {who}: {why}"
+
+
+def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path,
+         names: Optional[dict] = None) -> dict:
     """Run the worker's ``command`` on ``jobs`` ({key: inputs}) in up to one process per CPU core
-    (each job a mesh, or with ``whole`` a group of meshes packed together); {key: outputs}."""
+    (each job a mesh, or with ``names`` — {key: object names of its meshes} — a group of meshes
+    packed together); {key: outputs}."""
+    whole = names is not None
     python = python or sys.executable
     keys = list(jobs)
     size = [sum(int(v.size) for v in jobs[k].values()) for k in keys]
@@ -221,8 +242,7 @@ def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path, whole
         for proc, members, path_out in procs:
             stdout, stderr = proc.communicate()
             if proc.returncode != 0 or not path_out.is_file():
-                detail = (stderr or stdout).strip().splitlines()[-1:] or [f"exit status {proc.returncode}"]
-                raise BakeError(f"UV unwrapping (xatlas) failed: {detail[0]}")
+                raise BakeError(_failure(stderr or stdout, proc.returncode, members, keys, names))
             with np.load(path_out) as data:
                 for j, k in enumerate(members):
                     prefix = f"g{j}_" if whole else f"m{j}_"

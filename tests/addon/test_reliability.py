@@ -613,3 +613,45 @@ def test_the_same_save_twice(blend, tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.blend", "out.blend", "out.blend1",
                                                           "r.json"]
 
+
+
+# ------------------------------------------------------------------------------------------------
+# medium cases: file names, linked meshes, half floats, stale temporaries
+
+
+def test_objects_whose_names_clean_to_one_file_name_get_files_of_their_own(blend, tmp_path, capsys):
+    bpy.data.objects[GROUND].name, bpy.data.objects[OCCLUDER].name = "a/b", "a_b"
+    save(blend)
+    maps, out = tmp_path / "maps", tmp_path / "out.blend"
+    run = bake(capsys, blend, *FAST, *LIGHTMAP, "--layout", "per_object", "--output", maps,
+               "--save", out)
+    assert run.status == 0, run.err
+    assert any("share the file name Lightmap_a_b" in line for line in run.err), run.err
+    assert sorted(p.name for p in maps.glob("*.exr")) == ["Lightmap_a_b.exr", "Lightmap_a_b_2.exr"]
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    paths = {im.name: bpy.path.abspath(im.filepath) for im in bpy.data.images
+             if im.get("radiosity_baker_lightmap")}
+    assert sorted(paths) == ["Lightmap_a/b", "Lightmap_a_b"] and len(set(paths.values())) == 2
+
+
+def test_a_scene_whose_meshes_are_all_linked_from_a_library_is_exit_1(empty_scene, tmp_path, capsys):
+    lit_ground(empty_scene)
+    library = save(tmp_path / "library.blend")
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    with bpy.data.libraries.load(str(library), link=True) as (source, linked):
+        linked.objects = source.objects
+    for ob in linked.objects:
+        bpy.context.scene.collection.objects.link(ob)
+    blend = save(tmp_path / "in.blend")
+    fails(capsys, tmp_path, blend, 1, ["nothing to write", "linked from a library"], *FAST,
+          "--save", tmp_path / "out.blend", started=False)
+
+
+def test_lighting_beyond_half_float_is_written_as_float_with_a_warning(blend, tmp_path, capsys):
+    bpy.data.lights["Lamp"].energy = 1e8  # about 3·10⁵ under the lamp
+    save(blend)
+    maps = tmp_path / "maps"
+    run = bake(capsys, blend, *FAST, *LIGHTMAP, "--output", maps)
+    assert run.status == 0 and any("beyond half float's 65504" in line for line in run.err), run.err
+    exr = files.read_exr(maps / "Lightmap.exr")
+    assert np.isfinite(exr).all() and exr.max() > 65504

@@ -172,3 +172,17 @@ def test_pages_too_large_for_memory_stop_before_unwrapping_with_a_density_that_f
     settings.texel_density = 1.1 * fits
     with pytest.raises(SettingsError):
         budget.check([target], scene, settings)
+
+
+@pytest.mark.parametrize("many", [True, False])
+def test_a_page_too_small_for_the_padding_names_the_mesh_and_the_padding_that_fits(tmp_path, many):
+    pos, tris = _box()
+    meshes = [ChartMesh("crate", pos, tris, 20.0), ChartMesh("lid", pos * 0.5, tris, 20.0)]
+    with pytest.raises(BakeError, match="padding of") as info:
+        unwrap([meshes], max_size=16, padding=4, many=many, cache_dir=tmp_path)
+    message = str(info.value)
+    assert "crate" in message and ("lid" in message) != many  # the mesh, or all on the one page
+    padding = int(message.rsplit("--padding ", 1)[1].split(")")[0])
+    assert 1 <= padding < 4
+    layout, = unwrap([meshes], max_size=16, padding=padding, many=many, cache_dir=tmp_path)
+    assert all(max(size) <= 16 for size in layout.sizes)
