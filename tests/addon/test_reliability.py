@@ -655,3 +655,19 @@ def test_lighting_beyond_half_float_is_written_as_float_with_a_warning(blend, tm
     assert run.status == 0 and any("beyond half float's 65504" in line for line in run.err), run.err
     exr = files.read_exr(maps / "Lightmap.exr")
     assert np.isfinite(exr).all() and exr.max() > 65504
+
+
+def test_a_bake_into_a_folder_removes_the_temporaries_a_killed_bake_left_there(blend, tmp_path, capsys):
+    """Ours alone (hidden, ``.rb-`` and 8 hex digits, or check_folder's probe) and only those older
+    than the run: a file another bake is writing now stays."""
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    stale = [".Lightmap.rb-deadbeef.exr", ".Lightmap.rb-deadbeef-old.png", ".out.rb-0badf00d",
+             ".radiosity_baker-0badf00d.tmp"]
+    kept = [".Lightmap.rb-notes.txt", "Lightmap.rb-deadbeef.exr", ".young.rb-12345678.exr"]
+    for name in stale + kept:
+        (maps / name).write_text("left")
+        when = 1e9 if name != kept[-1] else os.stat(maps / name).st_mtime + 3600
+        os.utime(maps / name, (when, when))
+    assert bake(capsys, blend, *FAST, *LIGHTMAP, "--output", maps).status == 0
+    assert sorted(p.name for p in maps.iterdir()) == sorted(kept + ["Lightmap.exr", "Lightmap.png"])
