@@ -19,6 +19,7 @@ alike) ``pages``, ``p{p}_size`` (width, height) and per mesh ``m{m}_page``, ``m{
 charts: 1, or less where it was scaled down to fit), ``m{m}_uv`` float32[K,2] in [0,1] of its
 page and ``m{m}_idx`` uint32[M,3].
 """
+import os
 import sys
 
 import numpy as np
@@ -215,6 +216,22 @@ def pack(data) -> dict:
     return out
 
 
+def _die_with_parent() -> None:
+    """Exit when the bake that started this worker is gone: on Linux the kernel kills this
+    process when its parent dies (PR_SET_PDEATHSIG, even by ``kill -9``); a parent that died
+    before that was set is seen in the parent pid (``RADIOSITY_BAKER_PARENT``). Elsewhere the
+    parent kills its workers when it stops by an exception (Ctrl-C, cancel)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        pr_set_pdeathsig = 1
+        ctypes.CDLL(None).prctl(pr_set_pdeathsig, int(signal.SIGKILL))
+    parent = os.environ.get("RADIOSITY_BAKER_PARENT")
+    if parent is not None and os.getppid() != int(parent):
+        sys.exit(4)
+
+
 def main(command: str, path_in: str, path_out: str) -> int:
     """Run ``command``; on a layout that fails, the last line on stderr is ``failed: job J mesh M:
     why`` (J: the group, or the mesh of a charts job; M: the mesh in the group, -1 for all of it)
@@ -239,4 +256,5 @@ def main(command: str, path_in: str, path_out: str) -> int:
 
 
 if __name__ == "__main__":
+    _die_with_parent()
     sys.exit(main(sys.argv[1], sys.argv[2], sys.argv[3]))

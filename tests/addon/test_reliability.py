@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -671,3 +672,70 @@ def test_a_bake_into_a_folder_removes_the_temporaries_a_killed_bake_left_there(b
         os.utime(maps / name, (when, when))
     assert bake(capsys, blend, *FAST, *LIGHTMAP, "--output", maps).status == 0
     assert sorted(p.name for p in maps.iterdir()) == sorted(kept + ["Lightmap.exr", "Lightmap.png"])
+
+
+def _workers(pid: int) -> list[int]:
+    """The pids of the xatlas workers process ``pid`` started (Linux /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            parent = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+            command = (stat.parent / "cmdline").read_bytes()
+        except (OSError, ValueError, IndexError):
+            continue
+        if parent == pid and b"_xatlas_worker" in command:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` still runs (a zombie waiting to be reaped does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False
+
+
+def _until(condition, seconds: float) -> bool:
+    end = time.monotonic() + seconds
+    while not condition() and time.monotonic() < end:
+        time.sleep(0.05)
+    return condition()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc; PR_SET_PDEATHSIG")
+@pytest.mark.parametrize("how", ["Ctrl-C", "SIGINT", "SIGTERM", "kill -9"])
+def test_stopping_a_bake_while_it_unwraps_stops_the_xatlas_workers(empty_scene, tmp_path, how):
+    """A 20480-face sphere keeps xatlas busy for seconds: Ctrl-C (to the terminal's process group)
+    or SIGINT to the bake alone ends the bake with status 130 and its workers at once; SIGTERM or
+    kill -9 of the bake ends the workers with it."""
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=6)
+    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    lamp.location = (0.0, 0.0, 3.0)
+    empty_scene.collection.objects.link(lamp)
+    blend = save(tmp_path / "sphere.blend")
+    env = {k: v for k, v in os.environ.items() if k != "BLENDER_USER_RESOURCES"}
+    env["RADIOSITY_BAKER_CACHE"] = str(tmp_path / "cache")  # nothing cached: xatlas runs
+    proc = subprocess.Popen([sys.executable, "-m", "radiosity_baker", "bake", str(blend), *FAST,
+                             "--target", "lightmap", "--texel-density", "200", "--max-size", "4096",
+                             "--output", str(tmp_path / "maps")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=_as_from_a_shell, start_new_session=True)
+    try:
+        for line in proc.stdout:
+            if line.startswith("radiosity_baker: unwrap"):
+                break
+        assert _until(lambda: _workers(proc.pid), 20), "no xatlas worker started"
+        workers = _workers(proc.pid)
+        if how == "Ctrl-C":
+            os.killpg(proc.pid, signal.SIGINT)  # what a terminal does: the whole foreground group
+        else:
+            proc.send_signal({"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM}.get(how, signal.SIGKILL))
+        _, err = proc.communicate(timeout=60)
+        assert _until(lambda: not any(map(_running, workers)), 3), "xatlas workers still run"
+        if how in ("Ctrl-C", "SIGINT"):
+            assert proc.returncode == 130, err
+            assert err.strip().splitlines()[-1] == "radiosity_baker: bake cancelled"
+    finally:
+        proc.kill()
+        proc.wait()
