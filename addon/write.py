@@ -92,8 +92,7 @@ class ColorWrites:
 def _resolve(extraction: Extraction, attribute_name: str, settings, context):
     """(target, its object, whether it is written into a copy) per target written, and warnings.
 
-    Raises OutputError for a reserved name, a vanished or changed object, or a name clash;
-    ExtractionError when every target is skipped (linked from a library, topology changed).
+    Raises OutputError for a reserved name, a vanished or changed object, or a name clash.
     """
     check_attribute_name(attribute_name)
     warnings: list[str] = []
@@ -126,17 +125,19 @@ def _resolve(extraction: Extraction, attribute_name: str, settings, context):
                               f"{attribute_name!r}, which a color attribute cannot replace: choose "
                               f"another attribute name")
         out.append((target, ob, target.topology_changed))
-    if extraction.targets and not out:  # a bake that writes nothing is no success
-        more = f" (and {len(warnings) - 1} more)" if len(warnings) > 1 else ""
-        raise ExtractionError(f"nothing to write: {warnings[0]}{more}")
     return out, warnings
 
 
 def check_color_attributes(extraction: Extraction, attribute_name: str, settings,
                            context=None) -> None:
-    """Raise OutputError now (before baking) when the results could not be written: see
-    :func:`write_color_attributes`."""
-    _resolve(extraction, attribute_name, settings, context)
+    """Raise OutputError now (before baking) when the results could not be written (see
+    :func:`write_color_attributes`), ExtractionError when every target would be skipped (linked
+    from a library, modifiers changing the vertex count): a bake that writes nothing is no
+    success."""
+    out, warnings = _resolve(extraction, attribute_name, settings, context)
+    if extraction.targets and not out:
+        more = f" (and {len(warnings) - 1} more)" if len(warnings) > 1 else ""
+        raise ExtractionError(f"nothing to write: {warnings[0]}{more}")
 
 
 def prepare_color_attributes(extraction: Extraction, values, attribute_name: str, settings,
