@@ -12,6 +12,8 @@ and rebaking remove exactly those.
 """
 from __future__ import annotations
 
+from typing import Callable, Optional
+
 import bpy
 
 from . import write
@@ -31,18 +33,39 @@ def current(frames: list[int], frame: int) -> int:
     return min(frames, key=lambda f: (abs(f - frame), f))
 
 
+# Frames × vertices × 16 bytes (an RGBA float per vertex and frame) of attribute cache beyond which
+# a frame-range bake warns before it starts: the cache lives in memory and in the saved .blend.
+CACHE_WARN_BYTES = 1 << 30
+
+
+def cache_warning(extraction, frames: int) -> Optional[str]:
+    """A warning when ``frames`` per-frame attributes on the meshes of ``extraction`` would hold
+    more than CACHE_WARN_BYTES, else None."""
+    vertices = sum(t.num_vertices for t in extraction.targets)
+    size = frames * vertices * 16
+    if size <= CACHE_WARN_BYTES:
+        return None
+    return (f"{frames} frames × {vertices} vertices make {size / 2**30:.1f} GB of per-frame color "
+            f"attributes (more than {CACHE_WARN_BYTES / 2**30:g} GB), held in memory and saved in "
+            f"the .blend: bake fewer frames (--frames A:B:STEP) or into lightmaps")
+
+
 class CacheWrites:
     """Checked writes of an animation's color attributes (one ``write.ColorWrites`` per frame and
-    one for ``<name>``); ``apply`` makes them, adds the playback modifiers and returns warnings."""
+    one for ``<name>``); ``apply`` makes them, adds the playback modifiers and returns warnings.
+    progress(fraction): called as frames are written, from ``start`` to 1."""
 
-    def __init__(self, name: str, frames: list[int], per_frame: list, shown, objects: list[str]):
+    def __init__(self, name: str, frames: list[int], per_frame: list, shown, objects: list[str],
+                 progress: Optional[Callable[[float], None]] = None, start: float = 0.0):
         self.name, self.frames, self.per_frame, self.shown, self.objects = (name, frames, per_frame,
                                                                             shown, objects)
+        self._progress, self._start = progress, start
 
     def apply(self, context=None) -> list[str]:
         warnings = self.shown.apply(context)
-        for writes in self.per_frame:
+        for k, writes in enumerate(self.per_frame):
             writes.apply(context)
+            _report(self._progress, self._start + (1.0 - self._start) * (k + 1) / len(self.per_frame))
         group = _playback_group(self.name, self.frames)
         for name in self.objects:
             ob = bpy.data.objects[name]
@@ -55,15 +78,26 @@ class CacheWrites:
         return warnings
 
 
-def prepare(baked: list, name: str, settings, frame_now: int, context=None) -> CacheWrites:
+def _report(progress, fraction: float) -> None:
+    if progress is not None:
+        progress(fraction)
+
+
+def prepare(baked: list, name: str, settings, frame_now: int, context=None,
+            progress: Optional[Callable[[float], None]] = None) -> CacheWrites:
     """Check and compute the writes of an animation: ``baked`` lists (frame, extraction, values
     float32[S,3]) in frame order. Raises OutputError (nothing written) where a frame's attribute
     name is taken by other data or an object changed; objects whose topology changes between
-    frames cannot hold a cache (their vertex count is the attribute's length)."""
+    frames cannot hold a cache (their vertex count is the attribute's length).
+
+    progress(fraction): called as frames are prepared (up to 0.5) and then, by ``apply``, written
+    (up to 1). Time grows linearly with the frames."""
     frames = [f for f, _, _ in baked]
-    per_frame = [write.prepare_color_attributes(extraction, values, frame_attribute(name, f),
-                                                settings, context)
-                 for f, extraction, values in baked]
+    per_frame = []
+    for k, (f, extraction, values) in enumerate(baked):
+        per_frame.append(write.prepare_color_attributes(extraction, values, frame_attribute(name, f),
+                                                        settings, context))
+        _report(progress, 0.5 * (k + 1) / len(baked))
     shown_frame = current(frames, frame_now)
     _, extraction, values = baked[frames.index(shown_frame)]
     shown = write.prepare_color_attributes(extraction, values, name, settings, context)
@@ -77,12 +111,14 @@ def prepare(baked: list, name: str, settings, frame_now: int, context=None) -> C
                                 f"no per-frame attribute can hold them; bake them into lightmaps or "
                                 f"apply the modifiers")
     objects = sorted({t.object_name for t in baked[0][1].targets if not t.topology_changed})
-    return CacheWrites(name, frames, per_frame, shown, objects)
+    return CacheWrites(name, frames, per_frame, shown, objects, progress, 0.5)
 
 
 def _playback_group(name: str, frames: list[int]):
     """The node group storing the current frame's ``<name>.<frame>`` as ``<name>`` (frames outside
-    the range show the nearest end)."""
+    the range show the nearest end): the scene frame, rounded to the nearest baked one, makes the
+    attribute's name (a Format String node), so the group has the same few nodes for any number
+    of frames (one node per frame made building it quadratic in the frames)."""
     group_name = f"{PLAYBACK} {name}"
     group = bpy.data.node_groups.get(group_name)
     if group is not None:
@@ -103,27 +139,28 @@ def _playback_group(name: str, frames: list[int]):
     index.clamp = True
     rounded = nodes.new("ShaderNodeMath")
     rounded.operation = "ROUND"
-    switch = nodes.new("GeometryNodeIndexSwitch")
-    switch.data_type = "RGBA"
-    while len(switch.index_switch_items) < len(frames):
-        switch.index_switch_items.new()
+    frame = nodes.new("ShaderNodeMath")  # index → baked frame
+    frame.operation = "MULTIPLY_ADD"
+    frame.inputs[1].default_value, frame.inputs[2].default_value = step, frames[0]
+    whole = nodes.new("FunctionNodeFloatToInt")
+    whole.rounding_mode = "ROUND"
+    text = nodes.new("FunctionNodeFormatString")  # frame_attribute's name: <name>.<frame, 4 digits>
+    text.format_items.new("INT", "frame")
+    text.inputs["Format"].default_value = name.replace("{", "{{").replace("}", "}}") + ".{frame:04}"
+    read = nodes.new("GeometryNodeInputNamedAttribute")
+    read.data_type = "FLOAT_COLOR"
     store = nodes.new("GeometryNodeStoreNamedAttribute")
     store.data_type, store.domain = "FLOAT_COLOR", "POINT"
     store.inputs["Name"].default_value = name
-    links.new(time.outputs["Frame"], index.inputs["Value"])
-    links.new(index.outputs["Result"], rounded.inputs[0])
-    links.new(rounded.outputs[0], switch.inputs["Index"])
-    for k, frame in enumerate(frames):
-        read = nodes.new("GeometryNodeInputNamedAttribute")
-        read.data_type = "FLOAT_COLOR"
-        read.inputs["Name"].default_value = frame_attribute(name, frame)
-        read.location = (-200.0, -180.0 * k)
-        links.new(read.outputs["Attribute"], switch.inputs[k + 1])
-    links.new(gin.outputs[0], store.inputs["Geometry"])
-    links.new(switch.outputs[0], store.inputs["Value"])
-    links.new(store.outputs[0], gout.inputs[0])
-    for x, node in enumerate((gin, time, index, rounded, switch, store, gout)):
-        node.location = (220.0 * x - 600.0, 200.0)
+    chain = [(time.outputs["Frame"], index.inputs["Value"]), (index.outputs["Result"], rounded.inputs[0]),
+             (rounded.outputs[0], frame.inputs[0]), (frame.outputs[0], whole.inputs[0]),
+             (whole.outputs[0], text.inputs["frame"]), (text.outputs["String"], read.inputs["Name"]),
+             (gin.outputs[0], store.inputs["Geometry"]), (read.outputs["Attribute"], store.inputs["Value"]),
+             (store.outputs[0], gout.inputs[0])]
+    for out, into in chain:
+        links.new(out, into)
+    for x, node in enumerate((gin, time, index, rounded, frame, whole, text, read, store, gout)):
+        node.location = (200.0 * x - 800.0, 200.0)
     return group
 
 

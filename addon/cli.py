@@ -26,8 +26,9 @@ from ..core import BakeCancelled, Settings, device
 from ..core import settings as core_settings
 from ..core.errors import SettingsError
 from ..core.lightmap import files
+from . import lightmap
 from .job import USER_ERRORS, BakeJob
-from .outputs import OutputError, Staging, check_file
+from .outputs import OutputError, Staging, check_file, same_file
 
 PROG = "radiosity_baker"
 _ROOT = Path(__file__).resolve().parent.parent  # the repository / extension folder
@@ -150,10 +151,10 @@ def _bake(args) -> int:
     blend = Path(args.blend).resolve()
     if not blend.is_file():
         raise UsageError(f"no such .blend file: {args.blend}")
-    outputs = {name: getattr(args, name).resolve() for name in ("save", "report", "preview")
-               if getattr(args, name) is not None}
-    if len(set(outputs.values())) < len(outputs):
-        raise UsageError(f"{', '.join('--' + name for name in outputs)} must name different files")
+    given = {name: getattr(args, name) for name in ("save", "report", "preview")
+             if getattr(args, name) is not None}
+    _check_distinct(Path(args.blend), given)
+    outputs = {name: path.resolve() for name, path in given.items()}
     for path in outputs.values():
         check_file(path)
     # --device cuda without a GPU: a bad argument, said now; else the one line naming the device
@@ -162,6 +163,8 @@ def _bake(args) -> int:
         bpy.ops.wm.open_mainfile(filepath=str(blend))
     except RuntimeError as exc:
         raise UsageError(f"cannot open {blend}: {_first_line(exc)}") from None
+    if settings.target != "vertex_colors":  # the folder is known once the file is open ('//')
+        _check_lightmap_folder(lightmap.output_folder(settings), blend, outputs)
 
     told = set()
 
@@ -190,6 +193,32 @@ def _bake(args) -> int:
     print(f"{PROG}: baked {result.counts.get('elements', 0)} elements on {result.device} "
           f"in {job.seconds:.2f} s")
     return 0
+
+
+def _check_distinct(blend: Path, outputs: dict) -> None:
+    """Raise UsageError when an output ({option name: path as given}) names the input ``blend``
+    (only ``--save`` may: Blender's ``.blend1`` keeps the original) or the same file as another
+    output. The message names the paths as the user gave them."""
+    for name, path in outputs.items():
+        if name != "save" and same_file(path, blend):
+            raise UsageError(f"--{name} {path} names the input file {blend}: it would be "
+                             f"overwritten; choose another path")
+    names = list(outputs)
+    for i, first in enumerate(names):
+        for second in names[i + 1:]:
+            if same_file(outputs[first], outputs[second]):
+                raise UsageError(f"--{first} and --{second} both name {outputs[first]}: choose "
+                                 f"different files")
+
+
+def _check_lightmap_folder(folder: Path, blend: Path, outputs: dict) -> None:
+    """Raise UsageError when the input or an output ({option name: path}) is a file the lightmaps
+    written into ``folder`` may replace (``lightmap.may_replace``)."""
+    for name, path in {"input": blend, **outputs}.items():
+        if lightmap.may_replace(folder, path):
+            what = "the input file" if name == "input" else f"--{name}"
+            raise UsageError(f"{what} {path} lies in the lightmap folder {folder} under a name "
+                             f"the lightmap files take: choose another --output or file name")
 
 
 # A whole .blend file ends with an ENDB block (its code, then a header of zeros: 16 bytes or more)

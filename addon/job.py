@@ -141,11 +141,13 @@ class BakeJob:
 
     def _write(self, context) -> list[str]:
         t0 = time.perf_counter()
+        self.progress("write", 0.0)
         # Every check first (objects resolved by name, names free), files next: a failure leaves
         # Blender's data untouched.
         pending = [w.prepare(context) for w in self.writers]
         for apply in pending:
             self.warnings += apply()
+        self.progress("write", 1.0)
         self.timings["write"] = time.perf_counter() - t0
         self.seconds = time.perf_counter() - self._t0
         if hasattr(context.scene, "radiosity_baker"):  # the CLI may run without the add-on registered
@@ -156,7 +158,7 @@ class BakeJob:
         self._t0 = time.perf_counter()
         self.settings.validate()
         self.frame_now = context.scene.frame_current
-        self._sequence = Sequence(self.settings, self._on_progress, self._cancel, self._notify)
+        self._sequence = Sequence(self.settings, self.progress, self._cancel, self._notify)
         if self.animation and self.settings.bake_copy:
             raise BakeError("--bake-copy bakes one frame's evaluated mesh: it does not go with a "
                             "frame range")
@@ -229,7 +231,14 @@ class BakeJob:
         for w in self.writers:
             w.discard()
 
-    def _on_progress(self, stage: str, fraction: float) -> None:
+    def warn(self, message: Optional[str]) -> None:
+        """Keep a warning (None: none) and tell it now, before the bake runs."""
+        if message is not None and message not in self.warnings:
+            self.warnings.append(message)
+            if self._notify is not None:
+                self._notify(message)
+
+    def progress(self, stage: str, fraction: float) -> None:
         with self._lock:
             self._stage, self._fraction = stage, fraction
         if self._user_progress is not None:

@@ -21,9 +21,9 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core.lightmap import LightmapRequest, LightmapObject, files
+from ..core.lightmap import ATLAS_NAME, LightmapObject, LightmapRequest, budget, files
 from .extract import ExtractionError
-from .outputs import OutputError, Staging, check_folder
+from .outputs import OutputError, Staging, check_folder, same_file
 from .tags import IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, UV_TAG
 from .write import name_clash
 
@@ -134,6 +134,7 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
             density=object_density(ob)))
     if not targets:
         raise ExtractionError("no object can be lightmapped" + (f": {warnings[-1]}" if warnings else ""))
+    budget.check(targets, extraction.scene, settings)  # pages too large for memory: stop now
     return LightmapRequest(targets, python=python_executable(), cache_dir=_cache_dir()), warnings
 
 
@@ -149,6 +150,7 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
     """
     folder = folder if folder is not None else output_folder(settings)
     suffix = "" if frame is None else f".{frame:04d}"
+    names, _ = _file_names(result.pages)  # prepare() warned of the names it changed
     paths = {}
     with contextlib.ExitStack() as stack:
         own = staging is None
@@ -160,7 +162,7 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
                 raise OutputError(f"the lightmap {page.name} of an animation needs several pages "
                                   f"(a UDIM tile set), which Blender cannot play as an image "
                                   f"sequence: bake with --atlas-pages one or --layout per_object")
-            stem = _file_stem(page) + suffix
+            stem = names[page.name] + ("" if page.tile is None else f".{page.tile}") + suffix
             paths[page.stem] = folder / f"{stem}.exr"
             with staging.writing(paths[page.stem]) as temp:
                 files.write_exr(temp, page.rgb, settings.lightmap_format)
@@ -229,7 +231,13 @@ def prepare(result, request: LightmapRequest, settings) -> LightmapWrites:
         _check_uv_name(ob, me)
         _check_uv_room(ob, me)
         uv.append((me, corner_uv))
-    warnings, hookups = [], []
+    _, warnings = _file_names(result.pages)
+    for page in result.pages:
+        if files.exr_precision(page.rgb, settings.lightmap_format) != settings.lightmap_format:
+            warnings.append(f"lightmap {page.stem} holds values up to {float(page.rgb.max()):.4g}, "
+                            f"beyond half float's {files.HALF_MAX:g}: written with 32-bit float "
+                            f"channels")
+    hookups = []
     shown: dict[str, str] = {}  # material name -> page it shows
     for page in result.pages:
         for name in page.objects:
@@ -268,9 +276,34 @@ def _write_uv(me, uv: np.ndarray) -> None:
     me.update()
 
 
-def _file_stem(page) -> str:
-    """The file name of ``page`` without extension, safe on every file system."""
-    return bpy.path.clean_name(page.name) + ("" if page.tile is None else f".{page.tile}")
+def may_replace(folder: Path, path: Path) -> bool:
+    """Whether a lightmap bake into ``folder`` may replace the file ``path``: its folder is
+    ``folder`` and its name one that lightmap files take (``Lightmap….exr`` / ``.png``: pages,
+    tiles and frames alike), compared without case (for case-insensitive file systems)."""
+    name = path.name.lower()
+    return (name.startswith(ATLAS_NAME.lower()) and path.suffix.lower() in (".exr", ".png")
+            and same_file(path.parent, folder))
+
+
+def _file_names(pages) -> tuple[dict, list]:
+    """{page name: its files' name without tile, frame or extension}, safe on every file system and
+    unique among ``pages`` without case (names that clean to one, ``a/b`` and ``a_b``, or differ
+    only in case get ``_2``, ``_3`` …), and a warning for each name changed so."""
+    names, first, warnings = {}, {}, []
+    for page in pages:
+        if page.name in names:  # the tiles of a UDIM set share one name
+            continue
+        clean = name = bpy.path.clean_name(page.name)
+        k = 1
+        while name.lower() in first:
+            k += 1
+            name = f"{clean}_{k}"
+        first[name.lower()] = page.name
+        names[page.name] = name
+        if name != clean:
+            warnings.append(f"lightmaps {first[clean.lower()]} and {page.name} would share the file "
+                            f"name {clean}: {page.name} is written as {name}")
+    return names, warnings
 
 
 def _load_image(name: str, path: Path, pack: bool, tiled: bool = False, sequence: bool = False):

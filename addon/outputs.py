@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import secrets
 import shutil
+import time
 from pathlib import Path
 
 from ..core.errors import BakeError
@@ -16,6 +18,29 @@ from ..core.errors import BakeError
 class OutputError(BakeError):
     """A result cannot be written where it was asked for: an unwritable path, or a name that other
     data of the file already holds. The message names the path, or the object and the clash."""
+
+
+# The names of the temporary files Staging (``.NAME.rb-<8 hex>[-old].EXT``) and check_folder
+# (``.radiosity_baker-<8 hex>.tmp``) make: only these are ever removed as stale.
+_TEMPORARY = re.compile(r"\..+\.rb-([0-9a-f]{8})(-old)?(\.[^.]*)?|\.radiosity_baker-[0-9a-f]{8}\.tmp")
+
+
+def remove_stale(folder: Path, before: float, keep: str = "") -> None:
+    """Remove from ``folder`` the temporary files that bakes killed while writing (``kill -9``, a
+    crash) left behind: our names alone (``_TEMPORARY``), last modified before ``before`` (seconds
+    since the epoch, the start of this run), none of the token ``keep`` (this run's). Files that
+    cannot be removed are left."""
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return
+    for entry in entries:
+        match = _TEMPORARY.fullmatch(entry.name)
+        if match is None or (keep and match[1] == keep):
+            continue
+        with contextlib.suppress(OSError):
+            if entry.is_file(follow_symlinks=False) and entry.stat(follow_symlinks=False).st_mtime < before:
+                os.unlink(entry.path)
 
 
 def _make_folders(folder: Path, made: list) -> None:
@@ -39,6 +64,18 @@ def _remove_folders(made: list) -> None:
 
 def _reason(exc: OSError) -> str:
     return exc.strerror or str(exc)
+
+
+def same_file(a: Path, b: Path) -> bool:
+    """Whether paths ``a`` and ``b`` name one file: the same after resolving links, ``.`` and
+    ``..``, or (where both exist) the same device and inode, which also catches another spelling
+    of the name on a case-insensitive file system."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return False
 
 
 def check_folder(folder: Path, target=None) -> None:
@@ -78,11 +115,14 @@ class Staging:
     A temporary file sits in its target's folder (so the final rename is atomic, and a .blend's
     relative paths stay right) and keeps its suffix (so writers choose the format by it). Leaving
     the block without ``commit`` (an error, Ctrl-C) removes the temporary files and the folders made
-    for them; the targets are untouched.
+    for them; the targets are untouched. The first file written into a folder removes from it the
+    temporary files earlier bakes left when killed (``remove_stale``).
     """
 
     def __init__(self):
         self._token = secrets.token_hex(4)
+        self._started = time.time()
+        self._swept: set = set()  # folders cleared of stale temporary files (``remove_stale``)
         self._files: list = []   # (temporary, target, versions)
         self._folders: list = []  # made for the targets, deepest first
         self._committed = False
@@ -109,6 +149,9 @@ class Staging:
         temp = self._aside(target, "")
         try:
             _make_folders(target.parent, self._folders)
+            if target.parent not in self._swept:
+                self._swept.add(target.parent)
+                remove_stale(target.parent, self._started, self._token)
             self._files.append((temp, target, versions))
             yield temp
         except OSError as exc:

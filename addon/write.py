@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from .extract import Extraction, TargetMesh, realize_copy
+from .extract import Extraction, ExtractionError, TargetMesh, realize_copy
 from .outputs import OutputError
 
 
@@ -130,9 +130,14 @@ def _resolve(extraction: Extraction, attribute_name: str, settings, context):
 
 def check_color_attributes(extraction: Extraction, attribute_name: str, settings,
                            context=None) -> None:
-    """Raise OutputError now (before baking) when the results could not be written: see
-    :func:`write_color_attributes`."""
-    _resolve(extraction, attribute_name, settings, context)
+    """Raise OutputError now (before baking) when the results could not be written (see
+    :func:`write_color_attributes`), ExtractionError when every target would be skipped (linked
+    from a library, modifiers changing the vertex count): a bake that writes nothing is no
+    success."""
+    out, warnings = _resolve(extraction, attribute_name, settings, context)
+    if extraction.targets and not out:
+        more = f" (and {len(warnings) - 1} more)" if len(warnings) > 1 else ""
+        raise ExtractionError(f"nothing to write: {warnings[0]}{more}")
 
 
 def prepare_color_attributes(extraction: Extraction, values, attribute_name: str, settings,

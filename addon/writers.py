@@ -43,6 +43,8 @@ class ColorWriter:
             names += [animation.frame_attribute(job.settings.attribute, f) for f in job.frames_left]
         for name in names:
             write.check_color_attributes(job.extraction, name, job.settings, context)
+        if job.animation:
+            job.warn(animation.cache_warning(job.extraction, len(names) - 1))
 
     def target(self):
         return targets.make("vertices")
@@ -54,7 +56,8 @@ class ColorWriter:
         job = self.job
         if job.animation:
             writes = animation.prepare([(f, ex, r["vertices"].output) for f, ex, r in job.baked_frames],
-                                       job.settings.attribute, job.settings, job.frame_now, context)
+                                       job.settings.attribute, job.settings, job.frame_now, context,
+                                       lambda fraction: job.progress("write", fraction))
         else:
             writes = write.prepare_color_attributes(job.extraction, job.result["vertices"].output,
                                                     job.settings.attribute, job.settings, context)

@@ -205,7 +205,7 @@ def _denoised(pyoidn, image: np.ndarray) -> tuple:
     """(float32[H,W,3] RGB, seconds) of a Cycles image bake (float32[H,W,4], alpha = baked)
     denoised by OIDN's lightmap filter after its charts were dilated into the gutter (a bake
     margin of DENOISE_MARGIN texels), as lightmappers that bake with Cycles do."""
-    from radiosity_baker.core["lightmap"].pages import dilate
+    from radiosity_baker.core.lightmap.pages import dilate
 
     t0 = time.perf_counter()
     rgb = dilate(image[..., :3], image[..., 3] > 0.5, DENOISE_MARGIN)

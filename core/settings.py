@@ -177,7 +177,8 @@ class Settings:
     texel_density: float = _option(20.0, "Texel Density", "lightmap texels per metre of surface",
                                    "lightmap", low=1e-3, soft_high=1000.0)
     max_size: int = _option(1024, "Max Size", "largest lightmap side in texels (each page of an "
-                            "atlas of several is this size)", "lightmap", low=16, soft_high=8192)
+                            "atlas of several is this size); engines take at most 16384", "lightmap",
+                            low=16, high=16384, soft_high=8192)
     atlas_pages: str = _option("many", "Atlas Pages", "what happens when the charts do not fit "
                                "one page at the asked density", "lightmap", choices=ATLAS_PAGES)
     padding: int = _option(4, "Padding", "texels between lightmap charts, filled by dilation",

@@ -19,6 +19,7 @@ alike) ``pages``, ``p{p}_size`` (width, height) and per mesh ``m{m}_page``, ``m{
 charts: 1, or less where it was scaled down to fit), ``m{m}_uv`` float32[K,2] in [0,1] of its
 page and ``m{m}_idx`` uint32[M,3].
 """
+import os
 import sys
 
 import numpy as np
@@ -103,18 +104,63 @@ def _layout(meshes: list, scales: list, resolution: int, padding: int):
     return atlas
 
 
-def _fits_alone(mesh, max_size: int, padding: int) -> float:
-    """The scale (≤ 1) at which one mesh's charts fit a page of max_size by themselves."""
+class MeshError(RuntimeError):
+    """A layout that failed for one mesh: ``mesh``, its index in the group (or in a charts job)."""
+
+    def __init__(self, mesh: int, message: str):
+        super().__init__(message)
+        self.mesh = mesh
+
+
+def _collapsed(atlas, count: int) -> bool:
+    """Whether some mesh of the ``count`` in ``atlas`` was shrunk to charts without area."""
+    for k in range(count):
+        _, idx, uv = atlas[k]
+        q = uv.astype(np.float64)[idx.astype(np.int64)]
+        e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
+        if not (np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0).any():
+            return True
+    return False
+
+
+def _no_room(meshes: list, fits, max_size: int, padding: int) -> str:
+    """Why ``meshes`` found no room on a page of ``max_size``: their chart count and the padding,
+    and the largest smaller padding ``p`` at which ``fits(p)`` finds them room, if any."""
+    charts = sum(int(m[2].max()) + 1 if m[2].size else 0 for m in meshes)
+    text = f"{charts} charts {padding} texels apart do not fit a page of {max_size} texels"
+    p = next((p for p in range(padding - 1, 0, -1) if fits(p)), None)
+    if p is not None:
+        return text + f"; with a padding of {p} they fit (--padding {p}), or raise --max-size"
+    return text + " even 1 texel apart: raise --max-size"
+
+
+def _fits_alone(mesh, max_size: int, padding: int):
+    """The scale (≤ 1) at which one mesh's charts fit a page of max_size by themselves, None when
+    none is found (the padding alone fills the page)."""
     area, side = _footprint(mesh[0], mesh[2], padding)
     if 2 * side <= max_size and 4 * area <= FILL * max_size * max_size:
         return 1.0  # far smaller than a page
     s = min(1.0, (max_size - 2 * padding - 1) / max(side, 1e-9), max_size / max(area, 1e-9) ** 0.5)
     for _ in range(MAX_TRIES):
-        count = _layout([mesh], [s], max_size, padding).atlas_count
-        if count <= 1:
-            return s
+        atlas = _layout([mesh], [s], max_size, padding)
+        if atlas.atlas_count <= 1:
+            return None if _collapsed(atlas, 1) else s
         s *= 0.95  # a page short: a little smaller each try
-    raise RuntimeError(f"xatlas: no page of {max_size} texels holds a mesh")
+    return None
+
+
+def _one_page(meshes: list, base: list, max_size: int, padding: int):
+    """(atlas, scale): ``meshes``, each scaled by its ``base`` × the scale, on one page of at most
+    max_size, the scale lowered from 1 until they fit; None when none is found (or charts shrink
+    to nothing: the padding alone fills the page)."""
+    s = 1.0
+    for _ in range(MAX_TRIES):
+        atlas = _layout(meshes, [s * b for b in base], 0, padding)
+        longest = max(atlas.width, atlas.height)
+        if atlas.atlas_count <= 1 and longest <= max_size:
+            return None if _collapsed(atlas, len(meshes)) else (atlas, s)
+        s *= SHRINK_MARGIN * max_size / max(longest, max_size + 1)
+    return None
 
 
 def pack(data) -> dict:
@@ -126,19 +172,19 @@ def pack(data) -> dict:
     if not many:  # one density for all: each mesh's charts scaled to the lowest first
         density = [float(data[f"m{m}_density"]) for m in range(count)]
         base = [min(density) / d for d in density]
-        s = 1.0
-        for _ in range(MAX_TRIES):
-            atlas = _layout(meshes, [s * b for b in base], 0, padding)
-            longest = max(atlas.width, atlas.height)
-            if atlas.atlas_count <= 1 and longest <= max_size:
-                break
-            s *= SHRINK_MARGIN * max_size / max(longest, max_size + 1)
-        else:
-            raise RuntimeError(f"xatlas: no single page of {max_size} texels found")
+        found = _one_page(meshes, base, max_size, padding)
+        if found is None:
+            raise RuntimeError(_no_room(meshes, lambda p: _one_page(meshes, base, max_size, p),
+                                        max_size, padding))
+        atlas, s = found
         pages = [(list(range(count)), atlas)]
         scales = [s * b for b in base]
     else:
         scales = [_fits_alone(mesh, max_size, padding) for mesh in meshes]
+        for m, mesh in enumerate(meshes):
+            if scales[m] is None:
+                raise MeshError(m, _no_room([mesh], lambda p: _fits_alone(mesh, max_size, p),
+                                            max_size, padding))
         atlas = _layout(meshes, scales, 0, padding)
         pages = []
         if atlas.atlas_count <= 1 and max(atlas.width, atlas.height) <= max_size:
@@ -170,8 +216,28 @@ def pack(data) -> dict:
     return out
 
 
+def _die_with_parent() -> None:
+    """Exit when the bake that started this worker is gone: on Linux the kernel kills this
+    process when its parent dies (PR_SET_PDEATHSIG, even by ``kill -9``); a parent that died
+    before that was set is seen in the parent pid (``RADIOSITY_BAKER_PARENT``). Elsewhere the
+    parent kills its workers when it stops by an exception (Ctrl-C, cancel)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        pr_set_pdeathsig = 1
+        ctypes.CDLL(None).prctl(pr_set_pdeathsig, int(signal.SIGKILL))
+    parent = os.environ.get("RADIOSITY_BAKER_PARENT")
+    if parent is not None and os.getppid() != int(parent):
+        sys.exit(4)
+
+
 def main(command: str, path_in: str, path_out: str) -> int:
+    """Run ``command``; on a layout that fails, the last line on stderr is ``failed: job J mesh M:
+    why`` (J: the group, or the mesh of a charts job; M: the mesh in the group, -1 for all of it)
+    and the exit status 3."""
     data = np.load(path_in)
+    g = 0
     try:
         if command == "charts":
             out = charts(data)
@@ -183,11 +249,12 @@ def main(command: str, path_in: str, path_out: str) -> int:
                 group.update({k: data[k] for k in ("max_size", "padding", "many")})
                 out.update({prefix + k: v for k, v in pack(group).items()})
     except RuntimeError as exc:
-        print(exc, file=sys.stderr)
+        print(f"failed: job {g} mesh {getattr(exc, 'mesh', -1)}: {exc}", file=sys.stderr)
         return 3
     np.savez(path_out, **out)
     return 0
 
 
 if __name__ == "__main__":
+    _die_with_parent()
     sys.exit(main(sys.argv[1], sys.argv[2], sys.argv[3]))

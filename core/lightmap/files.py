@@ -21,16 +21,29 @@ def _oiio():
     return oiio
 
 
+# The largest finite half float: larger values would be stored as infinite.
+HALF_MAX = 65504.0
+
+
+def exr_precision(rgb: np.ndarray, precision: str) -> str:
+    """The channels float32[H,W,3] ``rgb`` is written with: ``precision``, but ``float`` where
+    ``half`` was asked and some value lies beyond ±HALF_MAX (it would become infinite)."""
+    if precision == "half" and rgb.size and float(np.abs(rgb).max()) > HALF_MAX:
+        return "float"
+    return precision
+
+
 def write_exr(path: Path, rgb: np.ndarray, precision: str = "half") -> None:
     """Write float32[H,W,3] linear RGB (row 0 bottom) as an RGBA OpenEXR with zip compression.
 
-    precision: ``half`` or ``float`` channels; alpha is 1. Raises BakeError naming the path when
-    it cannot be written.
+    precision: ``half`` or ``float`` channels (see :func:`exr_precision`: half only where every
+    value fits it); alpha is 1. Raises BakeError naming the path when it cannot be written.
     """
     oiio = _oiio()
     h, w = rgb.shape[:2]
     rgba = np.concatenate([rgb, np.ones((h, w, 1), np.float32)], axis=2)
-    spec = oiio.ImageSpec(w, h, 4, oiio.HALF if precision == "half" else oiio.FLOAT)
+    half = exr_precision(rgb, precision) == "half"
+    spec = oiio.ImageSpec(w, h, 4, oiio.HALF if half else oiio.FLOAT)
     spec.attribute("compression", "zip")
     _write(oiio, path, spec, np.ascontiguousarray(np.flipud(rgba), np.float32))
 

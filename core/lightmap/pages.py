@@ -255,7 +255,7 @@ def lay_out(request: LightmapRequest, problem) -> Layout:
                                                 o.corner_vert[o.corner_triangles], _asked(o, settings))
                                for o in g.owners] for g in fresh],
                              settings.max_size, settings.padding, settings.atlas_pages == "many",
-                             request.python, request.cache_dir)
+                             request.python, request.cache_dir, check=stages.check)
         for g, layout in zip(fresh, layouts):
             tiled = len(layout.sizes) > 1
             for o, index, density, tri_uv in zip(g.owners, layout.page, layout.density, layout.tri_uv):

@@ -13,12 +13,13 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import os
+import re
 import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from ..errors import BakeError
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
-_CACHE_VERSION = b"rb-unwrap-5"
+_CACHE_VERSION = b"rb-unwrap-6"
 
 
 @dataclass
@@ -100,7 +101,8 @@ def _worker_env() -> dict:
 
 
 def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: bool = True,
-           python: Optional[str] = None, cache_dir: Optional[Path] = None) -> list[Layout]:
+           python: Optional[str] = None, cache_dir: Optional[Path] = None,
+           check: Optional[Callable[[], None]] = None) -> list[Layout]:
     """Lay out each group of meshes on pages of its own; returns one Layout per group.
 
     python: interpreter for the workers (default ``sys.executable``; inside Blender the add-on
@@ -109,7 +111,8 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
     a group's pages by its charts and options, so an unchanged scene skips xatlas and a changed
     mesh is cut again alone. Meshes measured in millimetres are laid out as well as metre-sized
     ones (the worker rescales them for xatlas). Raises BakeError when a mesh has no triangle with
-    area or xatlas fails.
+    area or xatlas fails. ``check`` is called every 0.2 s while the workers run and raises (e.g.
+    BakeCancelled) to stop them.
     """
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     cache_dir.mkdir(parents=True, exist_ok=True)
@@ -126,17 +129,18 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
             jobs[key] = {"pos": pos, "idx": idx, "density": np.array(float(mesh.density))}
     charts = _cached(cache_dir, "c", jobs, lambda todo: _run(
         "charts", todo, {"padding": np.array(int(padding)), "max_size": np.array(int(max_size))}, python,
-        cache_dir))
-    packs = {}
-    for keys in chart_keys:
+        cache_dir, check=check))
+    packs, names = {}, {}
+    for group, keys in zip(groups, chart_keys):
         packs[_key(*keys, int(max_size), int(padding), bool(many))] = keys
+        names[_key(*keys, int(max_size), int(padding), bool(many))] = [mesh.name for mesh in group]
     options = {"max_size": np.array(int(max_size)), "padding": np.array(int(padding)),
                "many": np.array(int(bool(many)))}
     pack_jobs = {key: {f"m{m}_{name}": charts[k][name] for m, k in enumerate(keys)
                        for name in ("uv", "idx", "chart", "density")} | {"meshes": np.array(len(keys))}
                  for key, keys in packs.items()}
     packed = _cached(cache_dir, "p", pack_jobs, lambda todo: _run("pack", todo, options, python, cache_dir,
-                                                                  whole=True))
+                                                                  names=names, check=check))
     layouts = []
     for group, items, keys in zip(groups, cleaned, chart_keys):
         data = packed[_key(*keys, int(max_size), int(padding), bool(many))]
@@ -184,9 +188,30 @@ def _uv_areas(tri_uv: np.ndarray) -> np.ndarray:
         return np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0
 
 
-def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path, whole: bool = False) -> dict:
+def _failure(stderr: str, returncode: int, members: list, keys: list, names: Optional[dict]) -> str:
+    """The message of a worker that failed: its last line on stderr (``failed: job J mesh M:
+    why`` names the mesh, see ``_xatlas_worker.main``: the object is named when ``names`` gives
+    the meshes of each group job), else its exit status."""
+    last = (stderr.strip().splitlines() or [f"exit status {returncode}"])[-1]
+    match = re.fullmatch(r"failed: job (\d+) mesh (-?\d+): (.*)", last)
+    if match is None:
+        return f"UV unwrapping (xatlas) failed: {last}"
+    job, mesh, why = int(match[1]), int(match[2]), match[3]
+    if names is None:
+        return f"UV unwrapping (xatlas) failed: {why}"
+    group = names[keys[members[job]]]
+    who = group[mesh] if mesh >= 0 else ", ".join(group)
+    return f"UV unwrapping (xatlas) failed for {who}: {why}"
+
+
+def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path,
+         names: Optional[dict] = None, check: Optional[Callable[[], None]] = None) -> dict:
     """Run the worker's ``command`` on ``jobs`` ({key: inputs}) in up to one process per CPU core
-    (each job a mesh, or with ``whole`` a group of meshes packed together); {key: outputs}."""
+    (each job a mesh, or with ``names`` — {key: object names of its meshes} — a group of meshes
+    packed together); {key: outputs}. The workers are killed when this ends by an exception (a
+    failed worker, ``check`` raising, KeyboardInterrupt) and die with this process (see
+    ``_xatlas_worker._die_with_parent``)."""
+    whole = names is not None
     python = python or sys.executable
     keys = list(jobs)
     size = [sum(int(v.size) for v in jobs[k].values()) for k in keys]
@@ -197,35 +222,51 @@ def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path, whole
         bins[b].append(k)
         load[b] += size[k]
     out = {}
+    env = _worker_env() | {"RADIOSITY_BAKER_PARENT": str(os.getpid())}
     with tempfile.TemporaryDirectory(prefix="rb-xatlas-", dir=cache_dir) as tmp:
         procs = []
-        for b, members in enumerate(bins):
-            if not members:
-                continue
-            path_in, path_out = Path(tmp) / f"in{b}.npz", Path(tmp) / f"out{b}.npz"
-            payload = dict(options)
-            for j, k in enumerate(members):
-                if whole:
-                    payload.update({f"g{j}_{name}": v for name, v in jobs[keys[k]].items()})
-                else:
-                    payload.update({f"m{j}_{name}": v for name, v in jobs[keys[k]].items()})
-            payload["groups" if whole else "meshes"] = np.array(len(members))
-            np.savez(path_in, **payload)
-            try:
-                proc = subprocess.Popen([python, str(_WORKER), command, str(path_in), str(path_out)],
-                                        env=_worker_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                        text=True)
-            except OSError as exc:
-                raise BakeError(f"cannot start the UV unwrapper with {python}: {exc}") from None
-            procs.append((proc, members, path_out))
-        for proc, members, path_out in procs:
-            stdout, stderr = proc.communicate()
-            if proc.returncode != 0 or not path_out.is_file():
-                detail = (stderr or stdout).strip().splitlines()[-1:] or [f"exit status {proc.returncode}"]
-                raise BakeError(f"UV unwrapping (xatlas) failed: {detail[0]}")
-            with np.load(path_out) as data:
+        try:
+            for b, members in enumerate(bins):
+                if not members:
+                    continue
+                path_in, path_out = Path(tmp) / f"in{b}.npz", Path(tmp) / f"out{b}.npz"
+                payload = dict(options)
                 for j, k in enumerate(members):
-                    prefix = f"g{j}_" if whole else f"m{j}_"
-                    out[keys[k]] = {name[len(prefix):]: data[name] for name in data.files
-                                    if name.startswith(prefix)}
+                    if whole:
+                        payload.update({f"g{j}_{name}": v for name, v in jobs[keys[k]].items()})
+                    else:
+                        payload.update({f"m{j}_{name}": v for name, v in jobs[keys[k]].items()})
+                payload["groups" if whole else "meshes"] = np.array(len(members))
+                np.savez(path_in, **payload)
+                try:  # a session of its own: a terminal's Ctrl-C reaches the bake, which stops it
+                    proc = subprocess.Popen([python, str(_WORKER), command, str(path_in), str(path_out)],
+                                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                            text=True, start_new_session=True)
+                except OSError as exc:
+                    raise BakeError(f"cannot start the UV unwrapper with {python}: {exc}") from None
+                procs.append((proc, members, path_out))
+            for proc, members, path_out in procs:
+                stdout, stderr = _wait(proc, check)
+                if proc.returncode != 0 or not path_out.is_file():
+                    raise BakeError(_failure(stderr or stdout, proc.returncode, members, keys, names))
+                with np.load(path_out) as data:
+                    for j, k in enumerate(members):
+                        prefix = f"g{j}_" if whole else f"m{j}_"
+                        out[keys[k]] = {name[len(prefix):]: data[name] for name in data.files
+                                        if name.startswith(prefix)}
+        finally:  # an error, a cancel, Ctrl-C: the workers stop with the bake
+            for proc, _, _ in procs:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.communicate()
     return out
+
+
+def _wait(proc: subprocess.Popen, check: Optional[Callable[[], None]]) -> tuple:
+    """(stdout, stderr) of ``proc`` once it ends; ``check`` (None: none) is called every 0.2 s
+    meanwhile and raises to stop waiting (a cancelled bake)."""
+    while True:
+        try:
+            return proc.communicate(timeout=None if check is None else 0.2)
+        except subprocess.TimeoutExpired:
+            check()

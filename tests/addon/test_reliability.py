@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -195,6 +196,55 @@ def test_unwritable_outputs_are_exit_2_before_baking(blend, tmp_path, capsys, op
     target = tmp_path / where  # an absolute `where` replaces the folder
     extra = LIGHTMAP if option == "--output" else []
     fails(capsys, tmp_path, blend, 2, [str(target)], *FAST, *extra, option, target, started=False)
+
+
+@pytest.mark.parametrize("option", ["--report", "--preview"])
+@pytest.mark.parametrize("spelling", ["same", "relative", "dot-dot", "symlink", "hard link"])
+def test_an_output_naming_the_input_is_exit_2_and_leaves_it_alone(blend, tmp_path, capsys,
+                                                                 monkeypatch, option, spelling):
+    monkeypatch.chdir(tmp_path)
+    target = {"same": str(blend), "relative": f"./{blend.name}",
+              "dot-dot": f"{tmp_path}/missing/../{blend.name}",
+              "symlink": tmp_path / "link.blend", "hard link": tmp_path / "hard.blend"}[spelling]
+    if spelling == "symlink":
+        target.symlink_to(blend)
+    elif spelling == "hard link":
+        os.link(blend, target)
+    fails(capsys, tmp_path, blend, 2, [option, str(Path(target)), "input"], *FAST, option, target,
+          started=False)
+
+
+def test_two_outputs_naming_one_file_through_a_link_are_exit_2(blend, tmp_path, capsys):
+    (tmp_path / "report.json").write_text("{}")
+    (tmp_path / "alias.json").symlink_to(tmp_path / "report.json")
+    fails(capsys, tmp_path, blend, 2, ["--report", "--preview"], *FAST, "--report",
+          tmp_path / "report.json", "--preview", tmp_path / "alias.json", started=False)
+
+
+@pytest.mark.parametrize("option, name", [("--report", "Lightmap.png"), ("--preview", "lightmap.PNG"),
+                                          ("--save", "Lightmap_Ground.exr")])
+def test_an_output_a_lightmap_file_would_replace_is_exit_2(blend, tmp_path, capsys, option, name):
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    fails(capsys, tmp_path, blend, 2, [option, str(maps / name), "lightmap"], *FAST, *LIGHTMAP,
+          "--output", maps, option, maps / name, started=False)
+
+
+def test_an_input_in_the_lightmap_folder_under_a_lightmap_name_is_exit_2(blend, tmp_path, capsys):
+    inside = tmp_path / "Lightmap.exr"
+    inside.write_bytes(blend.read_bytes())
+    fails(capsys, tmp_path, inside, 2, [str(inside), "input"], *FAST, *LIGHTMAP, "--output", tmp_path,
+          started=False)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--max-size", "100000"], ["--max-size", "16384"]),
+    (["--max-size", "16384", "--texel-density", "100000", "--supersample", "8"],
+     ["million texels", "GB", "texel density of"])])
+def test_lightmap_pages_beyond_engines_or_memory_are_exit_2_before_baking(blend, tmp_path, capsys,
+                                                                         argv, words):
+    fails(capsys, tmp_path, blend, 2, words, *FAST, *LIGHTMAP, "--output", tmp_path / "maps", *argv,
+          started=False)
 
 
 def test_a_mesh_with_eight_uv_maps_is_an_error_naming_it(blend, tmp_path, capsys):
@@ -564,3 +614,128 @@ def test_the_same_save_twice(blend, tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.blend", "out.blend", "out.blend1",
                                                           "r.json"]
 
+
+
+# ------------------------------------------------------------------------------------------------
+# medium cases: file names, linked meshes, half floats, stale temporaries
+
+
+def test_objects_whose_names_clean_to_one_file_name_get_files_of_their_own(blend, tmp_path, capsys):
+    bpy.data.objects[GROUND].name, bpy.data.objects[OCCLUDER].name = "a/b", "a_b"
+    save(blend)
+    maps, out = tmp_path / "maps", tmp_path / "out.blend"
+    run = bake(capsys, blend, *FAST, *LIGHTMAP, "--layout", "per_object", "--output", maps,
+               "--save", out)
+    assert run.status == 0, run.err
+    assert any("share the file name Lightmap_a_b" in line for line in run.err), run.err
+    assert sorted(p.name for p in maps.glob("*.exr")) == ["Lightmap_a_b.exr", "Lightmap_a_b_2.exr"]
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    paths = {im.name: bpy.path.abspath(im.filepath) for im in bpy.data.images
+             if im.get("radiosity_baker_lightmap")}
+    assert sorted(paths) == ["Lightmap_a/b", "Lightmap_a_b"] and len(set(paths.values())) == 2
+
+
+def test_a_scene_whose_meshes_are_all_linked_from_a_library_is_exit_1(empty_scene, tmp_path, capsys):
+    lit_ground(empty_scene)
+    library = save(tmp_path / "library.blend")
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    with bpy.data.libraries.load(str(library), link=True) as (source, linked):
+        linked.objects = source.objects
+    for ob in linked.objects:
+        bpy.context.scene.collection.objects.link(ob)
+    blend = save(tmp_path / "in.blend")
+    fails(capsys, tmp_path, blend, 1, ["nothing to write", "linked from a library"], *FAST,
+          "--save", tmp_path / "out.blend", started=False)
+
+
+def test_lighting_beyond_half_float_is_written_as_float_with_a_warning(blend, tmp_path, capsys):
+    bpy.data.lights["Lamp"].energy = 1e8  # about 3·10⁵ under the lamp
+    save(blend)
+    maps = tmp_path / "maps"
+    run = bake(capsys, blend, *FAST, *LIGHTMAP, "--output", maps)
+    assert run.status == 0 and any("beyond half float's 65504" in line for line in run.err), run.err
+    exr = files.read_exr(maps / "Lightmap.exr")
+    assert np.isfinite(exr).all() and exr.max() > 65504
+
+
+def test_a_bake_into_a_folder_removes_the_temporaries_a_killed_bake_left_there(blend, tmp_path, capsys):
+    """Ours alone (hidden, ``.rb-`` and 8 hex digits, or check_folder's probe) and only those older
+    than the run: a file another bake is writing now stays."""
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    stale = [".Lightmap.rb-deadbeef.exr", ".Lightmap.rb-deadbeef-old.png", ".out.rb-0badf00d",
+             ".radiosity_baker-0badf00d.tmp"]
+    kept = [".Lightmap.rb-notes.txt", "Lightmap.rb-deadbeef.exr", ".young.rb-12345678.exr"]
+    for name in stale + kept:
+        (maps / name).write_text("left")
+        when = 1e9 if name != kept[-1] else os.stat(maps / name).st_mtime + 3600
+        os.utime(maps / name, (when, when))
+    assert bake(capsys, blend, *FAST, *LIGHTMAP, "--output", maps).status == 0
+    assert sorted(p.name for p in maps.iterdir()) == sorted(kept + ["Lightmap.exr", "Lightmap.png"])
+
+
+def _workers(pid: int) -> list[int]:
+    """The pids of the xatlas workers process ``pid`` started (Linux /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            parent = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+            command = (stat.parent / "cmdline").read_bytes()
+        except (OSError, ValueError, IndexError):
+            continue
+        if parent == pid and b"_xatlas_worker" in command:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` still runs (a zombie waiting to be reaped does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False
+
+
+def _until(condition, seconds: float) -> bool:
+    end = time.monotonic() + seconds
+    while not condition() and time.monotonic() < end:
+        time.sleep(0.05)
+    return condition()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc; PR_SET_PDEATHSIG")
+@pytest.mark.parametrize("how", ["Ctrl-C", "SIGINT", "SIGTERM", "kill -9"])
+def test_stopping_a_bake_while_it_unwraps_stops_the_xatlas_workers(empty_scene, tmp_path, how):
+    """A 20480-face sphere keeps xatlas busy for seconds: Ctrl-C (to the terminal's process group)
+    or SIGINT to the bake alone ends the bake with status 130 and its workers at once; SIGTERM or
+    kill -9 of the bake ends the workers with it."""
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=6)
+    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    lamp.location = (0.0, 0.0, 3.0)
+    empty_scene.collection.objects.link(lamp)
+    blend = save(tmp_path / "sphere.blend")
+    env = {k: v for k, v in os.environ.items() if k != "BLENDER_USER_RESOURCES"}
+    env["RADIOSITY_BAKER_CACHE"] = str(tmp_path / "cache")  # nothing cached: xatlas runs
+    proc = subprocess.Popen([sys.executable, "-m", "radiosity_baker", "bake", str(blend), *FAST,
+                             "--target", "lightmap", "--texel-density", "200", "--max-size", "4096",
+                             "--output", str(tmp_path / "maps")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=_as_from_a_shell, start_new_session=True)
+    try:
+        for line in proc.stdout:
+            if line.startswith("radiosity_baker: unwrap"):
+                break
+        assert _until(lambda: _workers(proc.pid), 20), "no xatlas worker started"
+        workers = _workers(proc.pid)
+        if how == "Ctrl-C":
+            os.killpg(proc.pid, signal.SIGINT)  # what a terminal does: the whole foreground group
+        else:
+            proc.send_signal({"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM}.get(how, signal.SIGKILL))
+        _, err = proc.communicate(timeout=60)
+        assert _until(lambda: not any(map(_running, workers)), 3), "xatlas workers still run"
+        if how in ("Ctrl-C", "SIGINT"):
+            assert proc.returncode == 130, err
+            assert err.strip().splitlines()[-1] == "radiosity_baker: bake cancelled"
+    finally:
+        proc.kill()
+        proc.wait()

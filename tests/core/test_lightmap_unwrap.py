@@ -147,3 +147,42 @@ def test_results_are_cached_per_mesh_content(tmp_path):
     with pytest.raises(BakeError, match="cannot start the UV unwrapper"):
         unwrap([[ChartMesh("box", pos * 1.01, tris, 16.0)]], 256, 2, python="/nonexistent/python",
                cache_dir=tmp_path)
+
+
+def test_pages_too_large_for_memory_stop_before_unwrapping_with_a_density_that_fits(monkeypatch):
+    """A 2 m × 2 m floor at 10⁴ texels/m would take 4·10⁸ texels; with 1 GB to use the check says
+    which density fits, and that density passes (while a tenth more does not)."""
+    from radiosity_baker.core import Settings
+    from radiosity_baker.core.errors import SettingsError
+    from radiosity_baker.core.lightmap import LightmapObject, budget
+
+    p, n, t = shapes.grid(2.0, 4)
+    scene = shapes.scene([(p, n, t, (0.5,) * 3, (0,) * 3)])
+    target = LightmapObject("floor", "floor", corner_vert=t.ravel().astype(np.int32),
+                            corner_triangles=np.arange(t.size, dtype=np.int32).reshape(-1, 3),
+                            triangle_offset=0)
+    monkeypatch.setattr(budget, "memory_budget", lambda: 1 << 30)
+    settings = Settings(target="lightmap", texel_density=1e4, max_size=16384)
+    with pytest.raises(SettingsError, match="texel density of") as info:
+        budget.check([target], scene, settings)
+    fits = float(str(info.value).rsplit("texel density of ", 1)[1].split()[0])
+    assert 100 < fits < 1e4
+    settings.texel_density = fits
+    assert budget.check([target], scene, settings) * budget.BYTES_PER_TEXEL <= 1 << 30
+    settings.texel_density = 1.1 * fits
+    with pytest.raises(SettingsError):
+        budget.check([target], scene, settings)
+
+
+@pytest.mark.parametrize("many", [True, False])
+def test_a_page_too_small_for_the_padding_names_the_mesh_and_the_padding_that_fits(tmp_path, many):
+    pos, tris = _box()
+    meshes = [ChartMesh("crate", pos, tris, 20.0), ChartMesh("lid", pos * 0.5, tris, 20.0)]
+    with pytest.raises(BakeError, match="padding of") as info:
+        unwrap([meshes], max_size=16, padding=4, many=many, cache_dir=tmp_path)
+    message = str(info.value)
+    assert "crate" in message and ("lid" in message) != many  # the mesh, or all on the one page
+    padding = int(message.rsplit("--padding ", 1)[1].split(")")[0])
+    assert 1 <= padding < 4
+    layout, = unwrap([meshes], max_size=16, padding=padding, many=many, cache_dir=tmp_path)
+    assert all(max(size) <= 16 for size in layout.sizes)

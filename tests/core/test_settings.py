@@ -33,7 +33,7 @@ def test_every_default_is_within_its_own_range(f):
 
 @pytest.mark.parametrize("name, value", [("light_samples", 0), ("visibility_rays", 256),
                                          ("tolerance", 0.9), ("supersample", 9), ("seed", -1),
-                                         ("max_size", 8), ("method", "magic")])
+                                         ("max_size", 8), ("max_size", 16385), ("method", "magic")])
 def test_out_of_range_values_are_refused_naming_the_setting(name, value):
     with pytest.raises(SettingsError, match=name):
         Settings(**{name: value}).validate()
