@@ -40,7 +40,8 @@ class ColorWriter:
             return  # the names were checked before the first frame
         names = [job.settings.attribute]
         if job.animation:
-            names += [animation.frame_attribute(job.settings.attribute, f) for f in job.frames_left]
+            names += [animation.frame_attribute(job.settings.attribute, f)
+                      for f in [job.frame, *job.frames_left]]
         for name in names:
             write.check_color_attributes(job.extraction, name, job.settings, context)
         if job.animation:

@@ -107,7 +107,7 @@ class Run:
     @property
     def started(self) -> bool:
         """Whether the bake got past extraction (its progress lines name the stages)."""
-        return "radiosity_baker: direct" in self.out
+        return "radiosity_baker: solve" in self.out
 
     @property
     def message(self) -> str:
