@@ -29,7 +29,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from . import targets as target_registry
-from .errors import BakeCancelled, BakeError
+from .errors import BakeCancelled, BakeError, SettingsError
 from .pipeline import BakeResult, Sequence, Solved, bake
 from .problem import Problem
 from .scene import SceneData
@@ -62,8 +62,8 @@ class Farm:
     ``local:N`` (a cluster of N worker processes on this machine, made here and closed with the
     farm). Use as a context manager or call ``close()``.
 
-    Raises BakeError, before any work, when the scheduler cannot be reached or no worker joins it
-    within WORKER_TIMEOUT seconds.
+    Raises SettingsError (a BakeError), before any work, when the scheduler cannot be reached or
+    no worker joins it within WORKER_TIMEOUT seconds; BakeError without ``distributed``.
     """
 
     def __init__(self, address: str, connect_timeout: float = CONNECT_TIMEOUT,
@@ -84,12 +84,12 @@ class Farm:
                 self.client = distributed.Client(address, timeout=connect_timeout)
         except (OSError, TimeoutError, ValueError) as exc:
             self.close()
-            raise BakeError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+            raise SettingsError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
         try:
             self.client.wait_for_workers(1, timeout=worker_timeout)
         except (OSError, TimeoutError) as exc:
             self.close()
-            raise BakeError(f"no worker joined the Dask scheduler at {address} within "
+            raise SettingsError(f"no worker joined the Dask scheduler at {address} within "
                             f"{worker_timeout:g} s ({exc})") from None
 
     def __enter__(self) -> "Farm":
