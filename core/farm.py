@@ -147,9 +147,9 @@ class Farm:
         it raised and was retried), from the scheduler's log."""
         story = self.client.story(*self.tasks) if self.tasks else []
         starts: dict = {}
-        for event in story:
-            if len(event) >= 3 and event[0] in self.tasks and event[2] == "processing":
-                starts[event[0]] = starts.get(event[0], 0) + 1
+        for event in story:  # ("scheduler", key, from state, to state, …) on the scheduler
+            if len(event) >= 4 and event[0] == "scheduler" and event[3] == "processing":
+                starts[event[1]] = starts.get(event[1], 0) + 1
         return sorted(k for k, n in starts.items() if n > 1)
 
     def report(self) -> dict:
