@@ -9,6 +9,11 @@ with ``start()`` (Warp releases the GIL, Blender stays responsive) or in the cal
 ``run_sync()``. What can stop the writing (names taken by other data, unwritable folders) is
 checked before baking, and again in ``finish()`` before the first file or Blender datum is
 written, since the file may have changed during a modal bake.
+
+With ``settings.scheduler`` the bake runs on a Dask cluster (``core.farm``, connected before
+anything is extracted): an animation's frames are submitted as tasks as they are extracted (the
+first one waited for when a writer lays out from it) and collected in order after the last; a
+single frame is solved here and its lightmap pages baked as tasks. Writing stays here.
 """
 from __future__ import annotations
 
@@ -17,6 +22,7 @@ import time
 from typing import Callable, Iterable, Optional
 
 from ..core import BakeCancelled, BakeError, Settings
+from ..core import farm as farm_mod
 from ..core.pipeline import Sequence
 from . import extract, props
 from .writers import WRITERS
@@ -70,6 +76,8 @@ class BakeJob:
         self.timings: dict[str, float] = {}
         self.warnings: list[str] = []
         self.seconds = 0.0
+        self.farm: Optional[farm_mod.Farm] = None
+        self._submitted: list = []  # farm frames: (frame, extraction, future) not yet collected
 
     # -- main thread -----------------------------------------------------------------------------
 
@@ -79,8 +87,12 @@ class BakeJob:
 
         Raises USER_ERRORS for settings or scenes that cannot be baked; nothing was changed then.
         """
-        self._begin(context)
-        self._extract(context)
+        try:
+            self._begin(context)
+            self._extract(context)
+        except BaseException:
+            self._close_farm()
+            raise
         self._launch()
 
     def advance(self, context) -> None:
@@ -94,12 +106,16 @@ class BakeJob:
 
     def run_sync(self, context) -> list[str]:
         """The whole bake in the calling (main) thread; returns the warnings (see ``finish``)."""
-        self._begin(context)
-        while True:
-            self._extract(context)
-            self._bake()
-            if self.error is not None or not self.frames_left:
-                break
+        try:
+            self._begin(context)
+            while True:
+                self._extract(context)
+                self._bake()
+                if self.error is not None or not self.frames_left:
+                    break
+        except BaseException:
+            self._discard()
+            raise
         return self.finish(context)
 
     def poll(self) -> tuple[str, float, bool]:
@@ -134,6 +150,11 @@ class BakeJob:
         finally:
             self._discard()
 
+    def _close_farm(self) -> None:
+        if self.farm is not None:
+            self.farm.close()
+            self.farm = None
+
     @property
     def files(self) -> dict:
         """{name: path} of the files the writers put on disk."""
@@ -164,6 +185,8 @@ class BakeJob:
                             "frame range")
         for w in self.writers:
             w.begin(context)
+        if self.settings.scheduler.strip():
+            self.farm = farm_mod.Farm(self.settings.scheduler.strip())
 
     def _extract(self, context) -> None:
         """Extract the next frame (the current one for a still bake), the scene's frame restored."""
@@ -206,28 +229,60 @@ class BakeJob:
         self._thread.start()
 
     def _bake(self) -> None:
-        """Bake the extracted frame; any exception is kept for ``finish()`` to raise on the main
-        thread."""
+        """Bake the extracted frame (on a farm: submit it, or bake its pages as tasks); any
+        exception is kept for ``finish()`` to raise on the main thread."""
         label = f"frame {self.frame}" if self.frame is not None else ""
         t0 = time.perf_counter()
         try:
-            self.result = self._sequence.bake(self.extraction.scene, [w.target() for w in self.writers],
-                                              label)
-            for w in self.writers:
-                w.baked(self.result)
+            targets = [w.target() for w in self.writers]
+            if self.farm is not None and self.animation:
+                self._submitted.append((self.frame, self.extraction, self.farm.submit_frame(
+                    self.extraction.scene, self.settings, targets, self.frame)))
+                first = not self.baked_frames and any(w.from_first_frame for w in self.writers)
+                if first or not self.frames_left:
+                    self._collect()
+                return
+            if self.farm is not None:
+                result = farm_mod.bake_split(self.farm, self.extraction.scene, self.settings, targets,
+                                             self._on_progress, self._cancel, self._notify)
+            else:
+                result = self._sequence.bake(self.extraction.scene, targets, label)
+            self._baked(result, time.perf_counter() - t0)
         except BaseException as exc:  # noqa: BLE001 - re-raised by finish()
             self.error = exc
-            return
-        for stage, seconds in self.result.timings.items():
-            self.timings[stage] = self.timings.get(stage, 0.0) + seconds
-        self.warnings += [w for w in self.result.warnings if w not in self.warnings]
+
+    def _collect(self) -> None:
+        """The farm's submitted frames, in order, handed to the writers as if baked here (each
+        seeing the frames after it as still to come); the last result's counts get the farm's
+        report."""
+        submitted, self._submitted = self._submitted, []
+        results = self.farm.gather([future for _, _, future in submitted], self._cancel)
+        left, now = self.frames_left, self.frame
+        try:
+            for k, ((frame, extraction, _), result) in enumerate(zip(submitted, results)):
+                self.frame, self.extraction = frame, extraction
+                self.frames_left = [f for f, _, _ in submitted[k + 1:]] + left
+                self._baked(result, sum(result.timings.values()))
+        finally:
+            self.frames_left, self.frame = left, now
+        self.result.counts["farm"] = self.farm.report()
+
+    def _baked(self, result, seconds: float) -> None:
+        """Hand the frame's result to the writers and note its timings, warnings and counts."""
+        self.result = result
+        for w in self.writers:
+            w.baked(result)
+        for stage, secs in result.timings.items():
+            self.timings[stage] = self.timings.get(stage, 0.0) + secs
+        self.warnings += [w for w in result.warnings if w not in self.warnings]
         if self.animation:
-            self.baked_frames.append((self.frame, self.extraction, self.result))
-            self.frames.append({"frame": self.frame, "seconds": round(time.perf_counter() - t0, 4),
-                                "stages": {k: round(v, 4) for k, v in self.result.timings.items()},
-                                "counts": self.result.counts})
+            self.baked_frames.append((self.frame, self.extraction, result))
+            self.frames.append({"frame": self.frame, "seconds": round(seconds, 4),
+                                "stages": {k: round(v, 4) for k, v in result.timings.items()},
+                                "counts": result.counts})
 
     def _discard(self) -> None:
+        self._close_farm()
         for w in self.writers:
             w.discard()
 

@@ -1,6 +1,8 @@
 """Properties › Render › "Radiosity Bake", shown whatever the render engine."""
 from __future__ import annotations
 
+import importlib.util
+
 import bpy
 
 from ..core.settings import TARGET_OUTPUTS, Settings, reads
@@ -12,6 +14,16 @@ def _prop(layout, s, name: str) -> None:
     row = layout.row()
     row.active = reads(Settings(method=s.method, content=s.content).solver, name)
     row.prop(s, name)
+
+
+def _farm(layout, s) -> None:
+    """The Scheduler field (a Dask farm), and how to get ``distributed`` where Blender lacks it
+    (the extension zip does not bundle it: README "Baking on a farm")."""
+    layout.prop(s, "scheduler")
+    if s.scheduler.strip() and importlib.util.find_spec("distributed") is None:
+        col = layout.column(align=True)
+        col.label(text="Needs the Python package 'distributed':", icon='ERROR')
+        col.label(text="pip install distributed into Blender's Python")
 
 
 class RENDER_PT_radiosity_bake(bpy.types.Panel):
@@ -41,6 +53,7 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
                      "directional_bins", "bounces", "ao_distance"):
             _prop(col, s, name)
         layout.prop(s, "bake_copy")
+        _farm(layout, s)
         col = layout.column(heading="Lightmap")
         col.active = "lightmap" in TARGET_OUTPUTS[s.target]
         for name in ("texel_density", "max_size", "atlas_pages", "padding", "layout", "output",

@@ -14,7 +14,9 @@ where noted:
   warnings;
 - ``discard()`` removes whatever was staged (a failed or cancelled bake).
 
-``files`` maps what a writer put on disk ({name: path}) for the report.
+``files`` maps what a writer put on disk ({name: path}) for the report; ``from_first_frame``:
+an animation's later frames need the first one baked (the lightmap's layout), so a farm waits for
+it before submitting them.
 """
 from __future__ import annotations
 
@@ -26,6 +28,8 @@ from .outputs import Staging
 class ColorWriter:
     """The ``vertices`` target into the color attribute ``settings.attribute`` (and, for an
     animation, one attribute per frame with a playback modifier)."""
+
+    from_first_frame = False
 
     def __init__(self, job):
         self.job = job
@@ -72,6 +76,8 @@ class LightmapWriter:
     """The ``lightmap`` target into EXR files in the output folder, ``Lightmap`` UV maps, images
     and material nodes. An animation's later frames keep the first frame's layout, and every
     frame's pages are staged as they are baked and go into place together."""
+
+    from_first_frame = True
 
     def __init__(self, job):
         self.job = job

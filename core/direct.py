@@ -593,13 +593,14 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
                    normals: wp.array(dtype=wp.vec3), sizes: wp.array(dtype=wp.float32),
                    mode: wp.array(dtype=wp.int32), count: int, tile: wp.array(dtype=wp.int32),
                    tile_index: wp.array(dtype=wp.int32), tile_count: wp.array(dtype=wp.int32),
-                   seed: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
+                   seed: int, first: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
                    rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
                    noise: wp.array(dtype=wp.float32)):
     """Per receiver by ``mode``: FULL ``count`` shadowed samples; UNSHADOWED the same without
     shadows; PROBE one sample, the receiver's own of its tile's stratified set (tile_index of
-    tile_count, seeded per tile); SKIP nothing (0). flags: 1 lit, 2 dark, 3 both; noise: relative
-    standard error (see _estimate)."""
+    tile_count, seeded per tile); SKIP nothing (0). Receiver i's jitter is seeded by first + i (its
+    index in the whole set). flags: 1 lit, 2 dark, 3 both; noise: relative standard error (see
+    _estimate)."""
     i = wp.tid() + offset
     md = mode[i]
     if md == MODE_SKIP:
@@ -614,7 +615,7 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
     total = count
     kb = int(0)
     ke = count
-    s = wp.randi(wp.rand_init(seed, i))
+    s = wp.randi(wp.rand_init(seed, first + i))
     if md == MODE_PROBE:
         total = tile_count[i]
         kb = tile_index[i]
@@ -631,13 +632,17 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
 
 
 def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray, mode: np.ndarray,
-             count: int, seed: int, tiles=None, progress: Optional[Callable[[float], None]] = None):
+             count: int, seed: int, tiles=None, progress: Optional[Callable[[float], None]] = None,
+             first: int = 0, whole: Optional[int] = None):
     """One pass of the direct-light kernel over N receivers of ``problem``.
 
     points, normals: float32[N,3] (m, the problem's frame; unit); sizes: float32[N] local feature
     size (m) for the ray offset; mode: int32[N] MODE_* per receiver; count: samples of the FULL and
     UNSHADOWED modes; seed: of the sample jitter; tiles: for MODE_PROBE, (tile int[N], the
-    receiver's index in its tile int[N], receivers in its tile int[N]). Returns (float32[N,3]
+    receiver's index in its tile int[N], receivers in its tile int[N]); first: the index of these
+    receivers' first in the whole set they are part of (a lightmap page baked alone), which seeds
+    their jitter, and whole: that set's size (it decides exact emitter weighing), None: N — so a
+    part gets the light the whole would. Returns (float32[N,3]
     lighting, int64[N] rays, int32[N] flags: 1 some emitter was seen, 2 some was shadowed, 3 both;
     float32[N] noise: each estimate's standard error relative to it, see ``_estimate``).
     """
@@ -658,24 +663,27 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
          wp.array(unit(normals), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
          wp.array(np.ascontiguousarray(mode, np.int32), dtype=wp.int32, device=d), int(count),
-         *tile_arrays, int(seed), int(exact_selection(problem, n)), problem.far, out, rays, flags,
+         *tile_arrays, int(seed), int(first), int(exact_selection(problem, n if whole is None else whole)),
+         problem.far, out, rays, flags,
          noise],
         dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
     return out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy(), noise.numpy()
 
 
 def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,
-                    progress: Optional[Callable[[float], None]] = None):
+                    progress: Optional[Callable[[float], None]] = None, part=None):
     """Direct lighting at receivers of ``problem`` (a ``core.problem.Problem``: its BVH, lights,
     device and ``settings.light_samples``, the stratified light samples per receiver).
 
     points, normals: float32[N,3] positions (m, the problem's frame) and unit normals; sizes:
-    float32[N] local feature size (m) for the ray offset. Returns (float32[N,3] lighting =
-    irradiance/π, number of shadow rays traced).
+    float32[N] local feature size (m) for the ray offset; part: where they lie in a larger set
+    (``receivers.Part``), None for a whole set. Returns (float32[N,3] lighting = irradiance/π,
+    number of shadow rays traced).
     """
     n = int(points.shape[0])
     out, rays, _, _ = estimate(problem, points, normals, sizes, np.full(n, MODE_FULL, np.int32),
-                            problem.settings.light_samples, problem.settings.seed, progress=progress)
+                            problem.settings.light_samples, problem.settings.seed, progress=progress,
+                            **(part.seeding() if part is not None else {}))
     return out, int(rays.sum())
 
 

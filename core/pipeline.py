@@ -90,6 +90,13 @@ class Sequence:
 
     def bake(self, scene: SceneData, targets: Optional[list] = None, label: str = "") -> BakeResult:
         """Bake one frame into ``targets``; see :func:`bake`."""
+        solved = self.solve(scene, label)
+        return solved.result({target.name: solved.light(target)
+                              for target in (targets if targets is not None else target_registry.default())})
+
+    def solve(self, scene: SceneData, label: str = "") -> "Solved":
+        """The frame's problem and solution, before any target (:meth:`bake` is this, then each
+        target's light); label: as for :meth:`bake`."""
         progress = self._progress
         if label and progress is not None:
             progress = (lambda stage, fraction, p=progress: p(f"{label}: {stage}", fraction))
@@ -121,14 +128,29 @@ class Sequence:
         self._solution = solution
         problem.counts["rays"] += int(solution.counts.get("rays", 0))
         problem.counts.update({k: v for k, v in solution.counts.items() if k != "rays"})
+        return Solved(problem, solver, solution)
 
-        results = {}
-        for target in targets if targets is not None else target_registry.default():
-            at = target.receivers(problem)
-            light = light_at(problem, solver, solution, at)
-            _finite(light.output, settings.solver)
-            results[target.name] = target.finish(problem, at, light)
-        return BakeResult(targets=results, device=problem.device.name, timings=stages.timings,
+
+@dataclass
+class Solved:
+    """A frame's ``problem`` (``core.problem.Problem``, its ``stages`` timing what follows),
+    ``solver`` (a ``core.solvers`` module) and ``solution``: what every target's light comes from."""
+
+    problem: Problem
+    solver: object
+    solution: object
+
+    def light(self, target):
+        """``target``'s result: its receivers, the light there (``receivers.light_at``), finished."""
+        at = target.receivers(self.problem)
+        light = light_at(self.problem, self.solver, self.solution, at)
+        _finite(light.output, self.problem.settings.solver)
+        return target.finish(self.problem, at, light)
+
+    def result(self, targets: dict) -> BakeResult:
+        """The BakeResult of the frame with ``targets`` ({name: result})."""
+        problem, stages = self.problem, self.problem.stages
+        return BakeResult(targets=targets, device=problem.device.name, timings=stages.timings,
                           counts=dict(problem.counts), warnings=stages.warnings,
                           peak_memory_bytes=_peak_rss_bytes())
 

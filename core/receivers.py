@@ -22,6 +22,23 @@ from .lightmap import shadows
 from .solvers import SOLVERS
 
 
+@dataclass(frozen=True)
+class Part:
+    """Where receivers cut from a larger set lie in it (a lightmap page baked alone, e.g. as a farm
+    task): first, the index of their first receiver in the whole set; tiles, the adaptive-shadow
+    tiles (``core.lightmap.shadows``) of the grids before theirs; whole, the receivers in the whole
+    set. Their sample jitter is seeded as in the whole set, so a part gets the light the whole
+    would give it, bit for bit."""
+
+    first: int
+    tiles: int
+    whole: int
+
+    def seeding(self) -> dict:
+        """The arguments of ``direct.estimate`` that place its receivers in the whole set."""
+        return {"first": self.first, "whole": self.whole}
+
+
 @dataclass
 class Receivers:
     """R receivers.
@@ -31,7 +48,8 @@ class Receivers:
     receiver as a weighted sum of elements; aligned: receiver r is element r; label: what they
     are, naming their stages (``texel`` → ``texel direct``); grids: for receivers that are the
     samples of raster grids (lightmap pages), each grid's ``lightmap.raster.Texels`` in receiver
-    order, over which direct light is traced adaptively; None elsewhere.
+    order, over which direct light is traced adaptively; None elsewhere. part: where they lie in
+    a larger set they were cut from (``Part``), None for a whole set.
     """
 
     points: np.ndarray
@@ -44,6 +62,7 @@ class Receivers:
     aligned: bool = False
     label: str = "receiver"
     grids: Optional[list] = None
+    part: Optional[Part] = None
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -68,16 +87,16 @@ def at_elements(problem) -> Receivers:
 
 def on_triangles(problem, triangles: np.ndarray, bary: np.ndarray, points: np.ndarray,
                  normals: np.ndarray, sizes: np.ndarray, label: str = "receiver",
-                 grids: Optional[list] = None) -> Receivers:
+                 grids: Optional[list] = None, part: Optional[Part] = None) -> Receivers:
     """Receivers on the scene's triangles (lightmap texels): ``triangles`` int32[R] scene triangle
     of each, ``bary`` float32[R,3] its barycentric coordinates there (interpolation weights of the
     triangle's corner elements); points, normals float32[R,3] and sizes float32[R] as sampled;
-    label, grids: see ``Receivers``."""
+    label, grids, part: see ``Receivers``."""
     scene = problem.scene
     return Receivers(points=points, normals=normals, sizes=sizes, albedo=scene.albedo[triangles],
                      emission=scene.emission[triangles],
                      elements=problem.elements.corner[triangles],
-                     weights=np.asarray(bary, np.float32), label=label, grids=grids)
+                     weights=np.asarray(bary, np.float32), label=label, grids=grids, part=part)
 
 
 def compose(content: str, field: np.ndarray, direct: np.ndarray, receivers: Receivers) -> np.ndarray:
@@ -112,7 +131,8 @@ def direct_at(problem, receivers: Receivers) -> np.ndarray:
     if receivers.aligned:
         return problem.direct
     stage = f"{receivers.label} direct"
-    args = (receivers.points, receivers.normals, receivers.sizes, problem.stages.reporter(stage))
+    args = (receivers.points, receivers.normals, receivers.sizes, problem.stages.reporter(stage),
+            receivers.part)
     if receivers.grids is not None and problem.settings.texel_shadows == "adaptive":
         light, rays = problem.stages.run(stage, shadows.texel_direct, problem, receivers.grids, *args)
     else:

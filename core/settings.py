@@ -10,6 +10,7 @@ and how).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, fields
 from typing import Optional
 
@@ -48,6 +49,8 @@ DIRECTIONAL_BINS = ("64", "256", "1024")
 DEVICES = ("auto", "cpu", "cuda")
 LIGHT_SELECTIONS = ("auto", "exact", "tree")
 GROUPS = ("solver", "lightmap", "output")
+# A Dask scheduler address (``scheduler``): a protocol and HOST:PORT, or local:N.
+_SCHEDULER = re.compile(r"local:[1-9][0-9]*|[a-z]+://\S+")
 
 # One line per choice, for tooltips and help.
 CHOICE_HELP = {
@@ -168,6 +171,11 @@ class Settings:
                           "frame into its own attribute or lightmap image of a sequence (empty: "
                           "the current frame; the panel's Bake Animation button: the scene's frame "
                           "range)", "output", placeholder="A:B[:STEP]")
+    scheduler: str = _option("", "Scheduler", "Dask scheduler to bake on as a farm: tcp://HOST:PORT "
+                             "(a running 'dask scheduler' with workers), local:N (N worker "
+                             "processes on this machine); an animation's frames, else each "
+                             "lightmap page, are its tasks (empty: bake here)", "output",
+                             placeholder="ADDRESS")
     bake_copy: bool = _option(False, "Bake Copy", "when modifiers change an object's vertex count, "
                               "bake into a new object '<name>_baked' instead of skipping it",
                               "output")
@@ -238,6 +246,9 @@ class Settings:
         if "lightmap" in self.targets and not self.output.strip():
             raise SettingsError("output folder must not be empty when baking lightmaps")
         self.frame_list()
+        if self.scheduler.strip() and not _SCHEDULER.fullmatch(self.scheduler.strip()):
+            raise SettingsError(f"scheduler must be tcp://HOST:PORT (or another Dask protocol) or "
+                                f"local:N with N ≥ 1, not {self.scheduler!r}")
         if self.content == "indirect" and not SOLVERS[self.solver].indirect:
             raise SettingsError(f"content indirect needs a method with indirect light; method "
                                 f"{self.method} computes none (it would bake black)")

@@ -300,17 +300,24 @@ def lay_out(request: LightmapRequest, problem) -> Layout:
     return Layout(pages, uvs, made, densities, sizes, warnings)
 
 
-def rasterize(layout: Layout, problem) -> list:
+def _page_triangles(layout: Layout, page: int) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles on page ``page`` of ``layout``: float32[T,3,2] their UVs in the page, int[T]
+    their scene triangles."""
+    members = layout.pages[page][5]
+    return (np.concatenate([layout.uvs[m.mesh_name][m.corner_triangles] for m in members]),
+            np.concatenate([np.arange(m.triangle_offset, m.triangle_offset + m.corner_triangles.shape[0])
+                            for m in members]))
+
+
+def rasterize(layout: Layout, problem, only: Optional[range] = None) -> list:
     """Each page's texels (stage ``raster``): per page (``raster.Texels`` at ``supersample``² samples
     per texel, int[N] scene triangle of each, float32[N,3] surface points and normals, float32[N]
-    metres per sample there)."""
+    metres per sample there); only: the indices of the pages to rasterise (default all)."""
     scene, dev, s = problem.scene, problem.device, problem.settings.supersample
-    uvs = layout.uvs
     out = []
-    for _, _, _, (w, h), _, members in layout.pages:
-        tri_uv = np.concatenate([uvs[m.mesh_name][m.corner_triangles] for m in members])
-        tri_scene = np.concatenate([np.arange(m.triangle_offset, m.triangle_offset
-                                              + m.corner_triangles.shape[0]) for m in members])
+    for k in range(len(layout.pages)) if only is None else only:
+        (w, h) = layout.pages[k][3]
+        tri_uv, tri_scene = _page_triangles(layout, k)
         texels = raster.rasterize(tri_uv, w * s, h * s, dev)
         pos = scene.positions[scene.triangles[tri_scene]]
         world = 0.5 * np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
@@ -324,16 +331,34 @@ def rasterize(layout: Layout, problem) -> list:
     return out
 
 
-def assemble(layout: Layout, grids: list, values: np.ndarray, problem) -> LightmapResult:
-    """The pages of ``layout`` from float32[N,3] ``values`` at the texel samples of ``grids`` (each
-    page's ``raster.Texels``, in order): resolved, dilated into padding, seams measured (stage
-    ``dilate``)."""
+def texel_counts(layout: Layout, problem) -> list[int]:
+    """The texel samples (receivers) of each page of ``layout``, as :func:`rasterize` makes them,
+    from the coverage alone (no surface points): where each page's receivers start among all
+    pages', for baking pages apart (``receivers.Part``)."""
+    s = problem.settings.supersample
+    return [raster.rasterize(_page_triangles(layout, k)[0], w * s, h * s, problem.device).count
+            for k, (_, _, _, (w, h), _, _) in enumerate(layout.pages)]
+
+
+def page_tiles(layout: Layout, page: int, supersample: int) -> int:
+    """The adaptive-shadow tiles (``shadows.tile_grid``) of page ``page`` at ``supersample``."""
+    w, h = layout.pages[page][3]
+    ty, tx = shadows.tile_grid(w * supersample, h * supersample)
+    return ty * tx
+
+
+def assemble(layout: Layout, grids: list, values: np.ndarray, problem,
+             only: Optional[range] = None) -> LightmapResult:
+    """The pages of ``layout`` (only: the indices of those ``grids`` are of, default all) from
+    float32[N,3] ``values`` at the texel samples of ``grids`` (each page's ``raster.Texels``, in
+    order): resolved, dilated into padding, seams measured (stage ``dilate``)."""
     settings, s = problem.settings, problem.settings.supersample
     uvs = layout.uvs
 
     def assemble_pages():
         out, start, seam_error = [], 0, 0.0
-        for (name, tile, objects, (w, h), density, members), texels in zip(layout.pages, grids):
+        for k, texels in zip(range(len(layout.pages)) if only is None else only, grids):
+            name, tile, objects, (w, h), density, members = layout.pages[k]
             rgb, covered = _resolve(texels, values[start:start + texels.count], w, h, s)
             start += texels.count
             rgb = dilate(rgb, covered, settings.padding)
@@ -343,11 +368,17 @@ def assemble(layout: Layout, grids: list, values: np.ndarray, problem) -> Lightm
                     rgb, uvs[m.mesh_name], m.corner_triangles, problem.shading.corner[_triangles(m)]))
         return out, seam_error
 
-    result_pages, seam_error = problem.stages.run("dilate", assemble_pages)
+    return collect(layout, *problem.stages.run("dilate", assemble_pages), problem)
+
+
+def collect(layout: Layout, made: list, seam_error: float, problem) -> LightmapResult:
+    """The result of ``layout`` from its pages ``made`` (``Page`` each, in layout order, made
+    here or apart) and their largest seam error; its warnings go to the problem's stages and its
+    report into ``problem.counts``."""
     for message in layout.warnings:
         problem.stages.warn(message)
-    result = LightmapResult(pages=result_pages, uv=layout.made, seam_error=seam_error,
-                            texels=int(sum(p.covered.sum() for p in result_pages)),
+    result = LightmapResult(pages=made, uv=layout.made, seam_error=seam_error,
+                            texels=int(sum(p.covered.sum() for p in made)),
                             warnings=layout.warnings, densities=layout.densities, sizes=layout.sizes)
     problem.counts["lightmap"] = result.report()
     return result

@@ -58,19 +58,27 @@ def _settled(cls: np.ndarray) -> np.ndarray:
     return out
 
 
+def tile_grid(width: int, height: int) -> tuple[int, int]:
+    """(rows, columns) of TILE × TILE tiles over a ``width`` × ``height`` sample grid."""
+    return -(-height // TILE), -(-width // TILE)
+
+
 def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,
-                 progress: Optional[Callable[[float], None]] = None):
+                 progress: Optional[Callable[[float], None]] = None, part=None):
     """Direct lighting at the texels of ``pages`` (``raster.Texels`` each, their texels in this
     order in points, normals float32[N,3] and sizes float32[N], as ``direct.estimate`` takes
-    them) with adaptive shadow rays (see the module). Returns (float32[N,3] lighting, rays)."""
+    them) with adaptive shadow rays (see the module); part: where these pages' texels lie among
+    all pages' (``receivers.Part``: tiles and texels before them), None when they are all. Returns
+    (float32[N,3] lighting, rays)."""
     settings = problem.settings
     report = progress or (lambda fraction: None)
+    seeding = part.seeding() if part is not None else {}
     n = int(points.shape[0])
     grids, tile, start = [], [], 0
-    base = 0
+    base = part.tiles if part is not None else 0
     for texels in pages:
         y, x = np.divmod(texels.index, texels.width)
-        shape = (-(-texels.height // TILE), -(-texels.width // TILE))
+        shape = tile_grid(texels.width, texels.height)
         tile.append(base + (y // TILE) * shape[1] + x // TILE)
         grids.append((texels, shape, base, slice(start, start + texels.count)))
         base += shape[0] * shape[1]
@@ -83,7 +91,7 @@ def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, 
     _, probe_rays, flags, _ = direct.estimate(problem, points, normals, sizes,
                                            np.full(n, direct.MODE_PROBE, np.int32), 1, settings.seed,
                                            (tile, index, per_tile[tile]),
-                                           progress=lambda f: report(0.2 * f))
+                                           progress=lambda f: report(0.2 * f), **seeding)
     mode = np.full(n, direct.MODE_FULL, np.int32)
     for texels, shape, first, rows in grids:
         cls = _settled(_tile_classes(flags[rows], tile[rows] - first, shape)).ravel()[tile[rows] - first]
@@ -91,7 +99,7 @@ def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, 
                               np.where(cls == _DARK, direct.MODE_SKIP, direct.MODE_FULL))
     samples = settings.light_samples
     out, rays, flags, noise = direct.estimate(problem, points, normals, sizes, mode, samples, settings.seed,
-                                       progress=lambda f: report(0.2 + 0.5 * f))
+                                       progress=lambda f: report(0.2 + 0.5 * f), **seeding)
     more = settings.shadow_budget - samples
     penumbra = np.zeros(n, bool)
     for texels, _, _, rows in grids:
@@ -105,7 +113,7 @@ def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, 
         extra, extra_rays, _, _ = direct.estimate(problem, points, normals, sizes,
                                                np.where(penumbra, direct.MODE_FULL, direct.MODE_SKIP),
                                                more, settings.seed + 1,
-                                               progress=lambda f: report(0.7 + 0.3 * f))
+                                               progress=lambda f: report(0.7 + 0.3 * f), **seeding)
         out[penumbra] = (samples * out[penumbra] + more * extra[penumbra]) / (samples + more)
         rays = rays + extra_rays
     return out, int(probe_rays.sum() + rays.sum())

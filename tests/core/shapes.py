@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from radiosity_baker.core import targets
-from radiosity_baker.core.scene import Lamps, SceneData
+from radiosity_baker.core.lightmap import LightmapObject
+from radiosity_baker.core.scene import LAMP_POINT, Lamps, SceneData
 
 
 def with_lightmap(request) -> list:
@@ -175,3 +176,28 @@ def cornell_box(cells: int = 8):
     light = m((343, 547.8, 227), (343, 547.8, 332), (213, 547.8, 332), (213, 547.8, 227))
     parts.append((*quad(light, 2, 2, inside), (0,) * 3, (16.0,) * 3))
     return scene(parts)
+
+
+def crates(count=6):
+    """``count`` 1 m boxes side by side on no floor, lit from above: the scene and one
+    ``LightmapObject`` per box (its six faces)."""
+    parts = []
+    for k in range(count):
+        for rot in ([0, 0, 0], [np.pi / 2, 0, 0], [np.pi, 0, 0], [-np.pi / 2, 0, 0], [0, np.pi / 2, 0], [0, -np.pi / 2, 0]):
+            p, n, t = grid(1.0, 2, z=0.5)
+            cx, sx, cy, sy = np.cos(rot[0]), np.sin(rot[0]), np.cos(rot[1]), np.sin(rot[1])
+            r = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+            parts.append(((p @ r.T + (1.5 * k, 0, 0.5)).astype(np.float32), (n @ r.T).astype(np.float32), t,
+                          (0.5,) * 3, (0,) * 3))
+    sc = scene(parts, lamp(LAMP_POINT, (4.0, 0.0, 4.0), power=(500.0,) * 3))
+    # one target per box (its six faces)
+    objects, t0 = [], 0
+    per_box = 6 * parts[0][2].shape[0]
+    for k in range(count):
+        tri = sc.triangles[t0:t0 + per_box]
+        corner_vert = tri.ravel() - tri.min()
+        objects.append(LightmapObject(f"crate{k}", f"crate{k}", corner_vert=corner_vert.astype(np.int32),
+                                      corner_triangles=np.arange(3 * per_box, dtype=np.int32).reshape(-1, 3),
+                                      triangle_offset=t0))
+        t0 += per_box
+    return sc, objects

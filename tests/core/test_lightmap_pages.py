@@ -245,32 +245,8 @@ def test_final_gather_brings_indirect_detail_finer_than_the_mesh_into_texels(tmp
     assert errors["gather"] < 0.5 * errors["interpolate"]
 
 
-def _crates(count=6):
-    """``count`` 1 m boxes side by side on no floor, lit from above: each a part of its own."""
-    parts = []
-    for k in range(count):
-        for rot in ([0, 0, 0], [np.pi / 2, 0, 0], [np.pi, 0, 0], [-np.pi / 2, 0, 0], [0, np.pi / 2, 0], [0, -np.pi / 2, 0]):
-            p, n, t = shapes.grid(1.0, 2, z=0.5)
-            cx, sx, cy, sy = np.cos(rot[0]), np.sin(rot[0]), np.cos(rot[1]), np.sin(rot[1])
-            r = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-            parts.append(((p @ r.T + (1.5 * k, 0, 0.5)).astype(np.float32), (n @ r.T).astype(np.float32), t,
-                          (0.5,) * 3, (0,) * 3))
-    sc = shapes.scene(parts, shapes.lamp(LAMP_POINT, (4.0, 0.0, 4.0), power=(500.0,) * 3))
-    # one target per box (its six faces)
-    targets, t0 = [], 0
-    per_box = 6 * parts[0][2].shape[0]
-    for k in range(count):
-        tri = sc.triangles[t0:t0 + per_box]
-        corner_vert = tri.ravel() - tri.min()
-        targets.append(LightmapObject(f"crate{k}", f"crate{k}", corner_vert=corner_vert.astype(np.int32),
-                                      corner_triangles=np.arange(3 * per_box, dtype=np.int32).reshape(-1, 3),
-                                      triangle_offset=t0))
-        t0 += per_box
-    return sc, targets
-
-
 def test_an_atlas_too_large_for_one_page_becomes_a_udim_tile_set_each_object_on_one_tile(tmp_path):
-    sc, targets = _crates()
+    sc, targets = shapes.crates()
     targets[1].density = 36.0  # an object with its own density
     settings = Settings(method="direct", light_samples=1, texel_density=30.0, max_size=128, padding=2,
                         device="cpu")
@@ -294,7 +270,7 @@ def test_an_atlas_too_large_for_one_page_becomes_a_udim_tile_set_each_object_on_
 
 
 def test_one_page_lowers_the_density_and_says_so(tmp_path):
-    sc, targets = _crates()
+    sc, targets = shapes.crates()
     settings = Settings(method="direct", light_samples=1, texel_density=32.0, max_size=128, padding=2,
                         atlas_pages="one", device="cpu")
     r = bake(sc, settings, targets=shapes.with_lightmap(LightmapRequest(targets, cache_dir=tmp_path)))
