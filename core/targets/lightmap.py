@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import directional
 from .. import receivers as receivers_mod
 from ..lightmap import Layout, LightmapRequest, LightmapResult, pages
 
@@ -38,6 +39,12 @@ class Target:
         return PageReceivers(**vars(texels), layout=layout)
 
     def finish(self, problem, receivers: PageReceivers, light: receivers_mod.Light) -> LightmapResult:
-        result = pages.assemble(receivers.layout, receivers.grids, light.output, problem)
+        """The pages; with ``directional`` sh each page also holds its texels' L1
+        (``core.directional``)."""
+        values = light.output
+        if problem.settings.directional == "sh":
+            l1 = directional.texel_l1(problem, receivers, light)
+            values = np.concatenate([values, l1.transpose(0, 2, 1).reshape(len(values), 9)], axis=1)
+        result = pages.assemble(receivers.layout, receivers.grids, values, problem)
         problem.counts["texels"] = result.texels
         return result
