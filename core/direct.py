@@ -573,6 +573,27 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     return value, rays, lit, dark, noise, moment
 
 
+@wp.func
+def leaf_seen(g: Emitters, mesh: wp.uint64, leaf: int, p: wp.vec3, seed: int, samples: int,
+              far: float) -> wp.vec3:
+    """The light of light-tree leaf ``leaf`` at a point p in space, as a receiver facing it sees it
+    (its unoccluded lighting towards ``leaf_direction`` × its visible fraction over ``samples``
+    shadow rays): (1/π) ∫ L dω over the emitter, for light probes."""
+    w = leaf_direction(g, leaf, p)
+    t = _leaf_transfer(g, leaf, p, w)
+    if t[0] + t[1] + t[2] <= 0.0:
+        return wp.vec3(0.0)
+    i = g.tree.leaf_index[leaf]
+    rot = _rotation(seed, leaf)
+    shadow = float(0.0)
+    rays = int(0)
+    if g.tree.leaf_kind[leaf] == lighttree.LEAF_LAMP:
+        shadow, rays = _lamp_shadow(g, mesh, i, p, w, p, 0, samples, rot, far, 1)
+    else:
+        shadow, rays = _triangle_shadow(g, mesh, i, p, w, p, 0, samples, rot, 1)
+    return t * shadow
+
+
 # Modes of the direct-light kernel per receiver.
 MODE_SKIP, MODE_FULL, MODE_UNSHADOWED, MODE_PROBE = -1, 0, 1, 2
 
