@@ -124,3 +124,17 @@ def test_l1_predicts_the_lighting_of_a_tilted_surface(tmp_path):
     print(f"tilted 30°: relative RMS error {error:.4f} (the plain lightmap's: {flat:.4f}); "
           f"indirect share {share:.3f}")
     assert error < 0.03 and flat > 3 * error
+
+
+def test_the_directional_exr_holds_l0_and_l1_channels(tmp_path):
+    from radiosity_baker.core.lightmap import files
+
+    page = _floor_under(_suns((-0.3, 0.2, -1.0)), tmp_path).pages[0]
+    path = tmp_path / "Lightmap.sh.exr"
+    files.write_directional_exr(path, page.rgb, page.l1, "float")
+    import OpenImageIO as oiio
+    spec = oiio.ImageInput.open(str(path)).spec()
+    assert tuple(spec.channelnames) == files.DIRECTIONAL_CHANNELS
+    back = files.read_exr(path)
+    np.testing.assert_array_equal(back[..., :3], page.rgb)
+    np.testing.assert_array_equal(back[..., 3:], page.l1)
