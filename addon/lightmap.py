@@ -167,6 +167,10 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
             with staging.writing(paths[page.stem]) as temp:
                 files.write_exr(temp, page.rgb, settings.lightmap_format)
                 files.verify(temp, page.size)
+            if page.l1 is not None:  # a directional bake: its L0 and L1 beside the page
+                with staging.writing(folder / f"{stem}.sh.exr") as temp:
+                    files.write_directional_exr(temp, page.rgb, page.l1, settings.lightmap_format)
+                    files.verify(temp, page.size)
             with staging.writing(folder / f"{stem}.png") as temp:
                 files.write_preview(temp, page.rgb)
                 files.verify(temp, page.size)

@@ -145,6 +145,49 @@ class LightmapWriter:
             self._staging = None
 
 
+class ProbesWriter:
+    """The ``probes`` target into ``Probes.json`` in the output folder: per probe its position (m,
+    world), validity and the SH of the arriving radiance (``core.sh``'s convention: nine RGB
+    coefficients, L1 = the first four)."""
+
+    def __init__(self, job):
+        self.job = job
+        self.files: dict = {}
+
+    def begin(self, context) -> None:
+        pass
+
+    def check(self, context) -> None:
+        lightmap.output_folder(self.job.settings)  # an unwritable folder fails before baking
+
+    def target(self):
+        return targets.make("probes")
+
+    def baked(self, result) -> None:
+        pass
+
+    def prepare(self, context):
+        import json
+
+        grid = self.job.result["probes"]
+        path = lightmap.output_folder(self.job.settings) / "Probes.json"
+        document = {"convention": "real SH of arriving radiance: Y00 = 0.282095, "
+                                  "(Y1-1, Y10, Y11) = 0.488603 (y, z, x), then L2; lighting(n) = "
+                                  "sum a_l c_lm Y_lm(n), a = (1, 2/3, 1/4)",
+                    "shape": list(grid.shape), "spacing": grid.spacing.tolist(),
+                    "points": grid.points.round(6).tolist(), "valid": grid.valid.tolist(),
+                    "sh": grid.sh.round(7).tolist()}
+        with Staging() as staging:
+            with staging.writing(path) as temp:
+                temp.write_text(json.dumps(document))
+            staging.commit()
+        self.files = {"Probes": path}
+        return lambda: []
+
+    def discard(self) -> None:
+        pass
+
+
 # The writer of each core target, in the order the final step prepares them: colour writes only
 # check, so they go before the lightmap's files are written.
-WRITERS = {"vertices": ColorWriter, "lightmap": LightmapWriter}
+WRITERS = {"vertices": ColorWriter, "lightmap": LightmapWriter, "probes": ProbesWriter}

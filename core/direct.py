@@ -28,6 +28,7 @@ from . import lighttree
 from .formfactor import outline_ff, tangent_frame, triangle_ff
 from .rays import lift, visible
 from .scene import LAMP_AREA, LAMP_SPOT, LAMP_SUN, SceneData
+from .sh import moment_of
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -410,6 +411,18 @@ def _leaf_light(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3):
 
 
 @wp.func
+def leaf_direction(g: Emitters, leaf: int, p: wp.vec3) -> wp.vec3:
+    """Unit direction from p towards light-tree leaf ``leaf``: a lamp's position (against a sun's
+    direction), an emissive triangle's centroid."""
+    i = g.tree.leaf_index[leaf]
+    if g.tree.leaf_kind[leaf] == lighttree.LEAF_LAMP:
+        if g.lamp_kind[i] == LAMP_SUN:
+            return -g.lamp_dir[i]
+        return wp.normalize(g.lamp_pos[i] - p)
+    return wp.normalize((g.em_v0[i] + g.em_v1[i] + g.em_v2[i]) / 3.0 - p)
+
+
+@wp.func
 def _importance(g: Emitters, node: int, p: wp.vec3, n: wp.vec3) -> float:
     """Importance of a tree node at p: the bound for local nodes, the exact unoccluded lighting of
     distant lamps (they have no position to bound)."""
@@ -440,7 +453,7 @@ def _rotation(seed: int, leaf: int) -> wp.vec2:
 def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.vec3, count: int,
               kb: int, ke: int, seed: int, shadows: int, exact: int, far: float):
     """Direct lighting at p (normal n, rays from ``origin``) from samples kb … ke−1 of ``count``
-    stratified light samples: (vec3 lighting, rays, lit, dark).
+    stratified light samples: (vec3 lighting, rays, lit, dark, noise, moment).
 
     Sample k is u = (k + r)/count for one random r; the light tree maps u to an emitter, each node
     splitting its interval of u among its children by importance (a bucket among its leaves by their
@@ -453,10 +466,13 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     exact unoccluded lighting, as one bucket: each emitter's share of the samples is then its share
     of the light. lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
     estimate's standard error from the spread of its samples, relative to it (or to NOISE_FLOOR of
-    its unshadowed light where it is darker than that); 0 unshadowed.
+    its unshadowed light where it is darker than that); 0 unshadowed. moment: mat33, rows R, G, B
+    of Σ (each emitter's lighting / cosθ) × its direction (``moment_of``): where the light comes
+    from, (1/π) ∫ L ω dω; its rows dotted with n give the lighting.
     """
     t = g.tree
     value = wp.vec3(0.0)
+    moment = wp.mat33(0.0)
     rays = int(0)
     lit = int(0)
     dark = int(0)
@@ -465,7 +481,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     sxx = float(0.0)
     su = float(0.0)
     if t.root < 0:
-        return value, rays, lit, dark, 0.0
+        return value, rays, lit, dark, 0.0, moment
     r = wp.float64(wp.randf(wp.rand_init(seed, -1)))
     nodes = stack_int()
     los = stack_f64()
@@ -514,6 +530,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             continue
         total = float(0.0)
         light = wp.vec3(0.0)
+        light_moment = wp.mat33(0.0)
         spots = int(0)
         for j in range(leaves):
             tj, wj, sj = _leaf_light(g, first + j, p, n)
@@ -525,6 +542,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             if wj > 0.0:
                 total += wj
                 light += tj
+                light_moment += moment_of(tj, leaf_direction(g, first + j, p), n)
                 spots += sj
         if total <= 0.0:
             continue
@@ -532,7 +550,9 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             # unshadowed, the bucket's samples may as well count all its leaves at once
             a = wp.max(_first_sample(lo, count, r), kb)
             b = wp.min(_first_sample(hi, count, r), ke)
-            value += light * (float(b - a) / (asked * float(hi - lo)))
+            share = float(b - a) / (asked * float(hi - lo))
+            value += light * share
+            moment += light_moment * share
             continue
         cum = float(0.0)
         l0 = lo
@@ -570,7 +590,9 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
                 if shadow < 1.0:
                     dark = 1
                 if shadow > 0.0:
-                    value += tj * (shadow * float(e1 - e0) / (asked * float(l1 - l0)))
+                    part = tj * (shadow * float(e1 - e0) / (asked * float(l1 - l0)))
+                    value += part
+                    moment += moment_of(part, leaf_direction(g, leaf, p), n)
                 # each sample adds x = T/p where seen: Σx² ≈ (T/p)² × shadow × samples
                 x = (tj[0] + tj[1] + tj[2]) / float(l1 - l0)
                 sx += x * shadow * float(e1 - e0)
@@ -581,7 +603,28 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     if asked > 1.0 and su > 0.0:
         error = wp.sqrt(wp.max(sxx - sx * sx / asked, 0.0) / (asked * (asked - 1.0)))
         noise = error / wp.max(sx / asked, NOISE_FLOOR * su / asked)
-    return value, rays, lit, dark, noise
+    return value, rays, lit, dark, noise, moment
+
+
+@wp.func
+def leaf_seen(g: Emitters, mesh: wp.uint64, leaf: int, p: wp.vec3, seed: int, samples: int,
+              far: float) -> wp.vec3:
+    """The light of light-tree leaf ``leaf`` at a point p in space, as a receiver facing it sees it
+    (its unoccluded lighting towards ``leaf_direction`` × its visible fraction over ``samples``
+    shadow rays): (1/π) ∫ L dω over the emitter, for light probes."""
+    w = leaf_direction(g, leaf, p)
+    t = _leaf_transfer(g, leaf, p, w)
+    if t[0] + t[1] + t[2] <= 0.0:
+        return wp.vec3(0.0)
+    i = g.tree.leaf_index[leaf]
+    rot = _rotation(seed, leaf)
+    shadow = float(0.0)
+    rays = int(0)
+    if g.tree.leaf_kind[leaf] == lighttree.LEAF_LAMP:
+        shadow, rays = _lamp_shadow(g, mesh, i, p, w, p, 0, samples, rot, far, 1)
+    else:
+        shadow, rays = _triangle_shadow(g, mesh, i, p, w, p, 0, samples, rot, 1)
+    return t * shadow
 
 
 # Modes of the direct-light kernel per receiver.
@@ -595,12 +638,13 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
                    tile_index: wp.array(dtype=wp.int32), tile_count: wp.array(dtype=wp.int32),
                    seed: int, first: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
                    rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
-                   noise: wp.array(dtype=wp.float32)):
+                   noise: wp.array(dtype=wp.float32), with_moments: int,
+                   moments: wp.array(dtype=wp.mat33)):
     """Per receiver by ``mode``: FULL ``count`` shadowed samples; UNSHADOWED the same without
     shadows; PROBE one sample, the receiver's own of its tile's stratified set (tile_index of
     tile_count, seeded per tile); SKIP nothing (0). Receiver i's jitter is seeded by first + i (its
-    index in the whole set). flags: 1 lit, 2 dark, 3 both; noise: relative standard error (see
-    _estimate)."""
+    index in the whole set). flags: 1 lit, 2 dark, 3 both; noise: relative standard error;
+    moments (``with_moments`` 1): where the light comes from (see _estimate)."""
     i = wp.tid() + offset
     md = mode[i]
     if md == MODE_SKIP:
@@ -608,6 +652,8 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
         rays[i] = 0
         flags[i] = 0
         noise[i] = 0.0
+        if with_moments != 0:
+            moments[i] = wp.mat33(0.0)
         return
     p = points[i]
     n = normals[i]
@@ -624,8 +670,11 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
     shadows = int(1)
     if md == MODE_UNSHADOWED:
         shadows = 0
-    value, nr, lit, dark, err = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows, exact, far)
+    value, nr, lit, dark, err, moment = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows,
+                                                  exact, far)
     out[i] = value
+    if with_moments != 0:
+        moments[i] = moment
     rays[i] = nr
     flags[i] = lit + 2 * dark
     noise[i] = err
@@ -633,7 +682,7 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
 
 def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray, mode: np.ndarray,
              count: int, seed: int, tiles=None, progress: Optional[Callable[[float], None]] = None,
-             first: int = 0, whole: Optional[int] = None):
+             first: int = 0, whole: Optional[int] = None, with_moments: bool = False):
     """One pass of the direct-light kernel over N receivers of ``problem``.
 
     points, normals: float32[N,3] (m, the problem's frame; unit); sizes: float32[N] local feature
@@ -644,7 +693,9 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     their jitter, and whole: that set's size (it decides exact emitter weighing), None: N — so a
     part gets the light the whole would. Returns (float32[N,3]
     lighting, int64[N] rays, int32[N] flags: 1 some emitter was seen, 2 some was shadowed, 3 both;
-    float32[N] noise: each estimate's standard error relative to it, see ``_estimate``).
+    float32[N] noise: each estimate's standard error relative to it, see ``_estimate``), and with
+    ``with_moments`` a fifth, float32[N,3,3]: per receiver rows R, G, B of the light's first moment
+    (1/π) ∫ L ω dω (world-space vectors; each row · normal = the lighting).
     """
     dev = problem.device
     d = dev.name
@@ -653,6 +704,7 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     rays = wp.zeros(n, dtype=wp.int32, device=d)
     flags = wp.zeros(n, dtype=wp.int32, device=d)
     noise = wp.zeros(n, dtype=wp.float32, device=d)
+    moments = wp.zeros(n if with_moments else 1, dtype=wp.mat33, device=d)
     if tiles is None:
         tiles = (np.zeros(1, np.int32),) * 3
     tile_arrays = [wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=d) for a in tiles]
@@ -664,10 +716,11 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
          wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
          wp.array(np.ascontiguousarray(mode, np.int32), dtype=wp.int32, device=d), int(count),
          *tile_arrays, int(seed), int(first), int(exact_selection(problem, n if whole is None else whole)),
-         problem.far, out, rays, flags,
-         noise],
+         problem.far, out, rays, flags, noise, int(with_moments), moments],
         dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
-    return out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy(), noise.numpy()
+    result = (out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy(),
+              noise.numpy())
+    return result + (moments.numpy(),) if with_moments else result
 
 
 def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray,

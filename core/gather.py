@@ -35,6 +35,7 @@ from . import device as device_mod
 from .formfactor import cluster_ff, disk_ff, fan_ff
 from .hemisphere import BINS, CELL, bins_vec, frame_of, splat_of
 from .hierarchy import Nodes
+from .sh import GRAZING, moment_of
 from .surfels import Surfels, fan_centre
 from .traversal import cut_advance, cut_begin, cut_skip, cut_weight, opening
 
@@ -57,12 +58,15 @@ class Gather:
     """Per receiver: accessibility float32[N] in [0,1]; bent_normal float32[N,3] unit (the mean
     unoccluded direction); light float32[N,3] gathered lighting (irradiance/π from the senders'
     radiance, overlaps resolved per cell), None when no radiance was given; visits: int32[N] tree
-    nodes each traversal visited (the work per receiver)."""
+    nodes each traversal visited (the work per receiver); moment: float32[N,3,3] where the gathered
+    light comes from (``core.sh``: rows R, G, B of (1/π) ∫ L ω dω, world space; each row · the
+    normal ≈ light), None unless asked for."""
 
     accessibility: np.ndarray
     bent_normal: np.ndarray
     light: Optional[np.ndarray]
     visits: np.ndarray
+    moment: Optional[np.ndarray] = None
 
 
 @wp.func
@@ -111,10 +115,34 @@ def resolve(near: bins_vec, near_back: bins_vec, front: bins_vec, back: bins_vec
         blocked = wp.max(near[b], near_back[b])
         fill = wp.max(front[b] + near[b], back[b] + near_back[b])
         occ += wp.max(wp.max(blocked, peak[b]), wp.min(fill, CELL))
-        f = front[b]
-        if f > 0.0:
-            light += wp.vec3(red[b], green[b], blue[b]) * wp.min(1.0, wp.max(CELL - blocked, peak[b]) / f)
+        light += wp.vec3(red[b], green[b], blue[b]) * cell_share(near[b], near_back[b], front[b], peak[b])
     return wp.vec4(occ, light[0], light[1], light[2])
+
+
+@wp.func
+def cell_share(near: float, near_back: float, front: float, peak: float) -> float:
+    """The share of a cell's far front light that reaches the receiver (see ``resolve``)."""
+    if front <= 0.0:
+        return 0.0
+    return wp.min(1.0, wp.max(CELL - wp.max(near, near_back), peak) / front)
+
+
+@wp.func
+def resolve_moment(near: bins_vec, near_back: bins_vec, front: bins_vec, peak: bins_vec,
+                   red: bins_vec, green: bins_vec, blue: bins_vec, mx: bins_vec, my: bins_vec,
+                   mz: bins_vec, near_moment: wp.mat33) -> wp.mat33:
+    """Where the light ``resolve`` finds comes from (``core.sh.moment_of``): each cell's light as
+    ``resolve`` takes it, from its contributions' mean direction over cosθ (mx, my, mz: that
+    direction summed weighted by each contribution's light, all channels), plus the near
+    field's own moment."""
+    moment = near_moment
+    for b in range(BINS):
+        weight = red[b] + green[b] + blue[b]
+        if weight > 0.0:
+            share = cell_share(near[b], near_back[b], front[b], peak[b])
+            moment += wp.outer(wp.vec3(red[b], green[b], blue[b]) * share,
+                               wp.vec3(mx[b], my[b], mz[b]) / weight)
+    return moment
 
 
 @wp.kernel
@@ -122,7 +150,8 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                    s: Surfels, distance: float, open_k: float, with_light: int,
                    radiance: wp.array(dtype=wp.vec3), out_access: wp.array(dtype=wp.float32),
                    out_bent: wp.array(dtype=wp.vec3), out_light: wp.array(dtype=wp.vec3),
-                   out_visits: wp.array(dtype=wp.int32)):
+                   out_visits: wp.array(dtype=wp.int32), with_moment: int,
+                   out_moment: wp.array(dtype=wp.mat33)):
     i = wp.tid() + offset
     p = rp[i]
     n = rn[i]
@@ -137,6 +166,11 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
     green = bins_vec()
     blue = bins_vec()
     near_light = wp.vec3(0.0)
+    # where the far light of each cell comes from, and the near field's moment (with_moment)
+    mx = bins_vec()
+    my = bins_vec()
+    mz = bins_vec()
+    near_moment = wp.mat33(0.0)
     raw = float(0.0)
     dirsum = wp.vec3(0.0)
     visits = int(0)
@@ -159,6 +193,7 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
         part = wp.vec4(0.0)
         take = float(1.0)
         dhat = v / dist
+        near_dir = dhat  # where a leaf's exact (near-field) part comes from, for the moment
         if child < 0:
             if dist < distance:
                 e = t.element[node]
@@ -171,6 +206,11 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                 if toward < 1.0 and part[0] + part[1] + part[2] + part[3] > 0.0:
                     centre = fan_centre(e, s.vertex, s.fan_offsets, s.fan_triangles, s.tris, s.points)
                     dhat = wp.normalize(toward * v + (1.0 - toward) * (centre - p))
+                # The near field's moment: from the centre of the element's triangles, not of its
+                # disk (a wall's bottom vertex lies at the floor's horizon, its triangles above it).
+                if with_moment != 0 and part[2] > 0.0:
+                    near_dir = wp.normalize(
+                        fan_centre(e, s.vertex, s.fan_offsets, s.fan_triangles, s.tris, s.points) - p)
         else:
             # Never nearer than a leaf would take its exact form factor: a chain of one-child
             # cells over a single disk must reach that leaf's near field.
@@ -191,6 +231,8 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
             if with_light != 0:
                 light = radiance[node]
             sp = splat_of(f, dhat)
+            slant = dhat / wp.max(wp.dot(dhat, n), GRAZING)
+            lum = (light[0] + light[1] + light[2]) * part[0]
             for k in range(4):  # the splat's cells, updated in place
                 c = sp.cells[k]
                 wk = sp.weights[k]
@@ -202,13 +244,22 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
                 red[c] += light[0] * part[0] * wk
                 green[c] += light[1] * part[0] * wk
                 blue[c] += light[2] * part[0] * wk
+                if with_moment != 0:
+                    mx[c] += slant[0] * lum * wk
+                    my[c] += slant[1] * lum * wk
+                    mz[c] += slant[2] * lum * wk
             near_light += light * part[2]
+            if with_moment != 0:
+                near_moment += moment_of(light * part[2], near_dir, n)
     res = resolve(near, near_back, front, back, peak, red, green, blue, near_light)
     occ = res[0]
     out_access[i] = wp.clamp(1.0 - occ, 0.0, 1.0)
     out_visits[i] = visits
     if with_light != 0:
         out_light[i] = wp.vec3(res[1], res[2], res[3])
+    if with_moment != 0:
+        out_moment[i] = resolve_moment(near, near_back, front, peak, red, green, blue, mx, my, mz,
+                                       near_moment)
     bent = n
     if raw > 0.0:
         bent = n - dirsum * (wp.min(occ, 1.0) / raw)
@@ -219,14 +270,16 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
 
 
 def gather(problem, points: np.ndarray, normals: np.ndarray, distance: float,
-           radiance: Optional[wp.array] = None, open_k: float = OPEN, progress=None) -> Gather:
+           radiance: Optional[wp.array] = None, open_k: float = OPEN, progress=None,
+           with_moment: bool = False) -> Gather:
     """Accessibility, bent normals and (with ``radiance``) gathered light at N receivers from the
     elements of ``problem`` (over ``problem.tree``).
 
     points: float32[N,3] receiver positions (m); normals: float32[N,3] unit; distance: AO distance
     (m), senders farther away count for nothing; radiance: vec3[tree.count] radiance leaving each
     node's front (e.g. ``hierarchy.node_means`` of per-element radiance), or None for AO only;
-    open_k: OPEN, or ALL_PAIRS for the brute-force sum over every element; progress(fraction).
+    open_k: OPEN, or ALL_PAIRS for the brute-force sum over every element; progress(fraction);
+    with_moment (needs ``radiance``): also where the light comes from (``Gather.moment``).
     """
     tree = problem.tree
     dev = problem.device
@@ -237,6 +290,7 @@ def gather(problem, points: np.ndarray, normals: np.ndarray, distance: float,
     with_light = radiance is not None
     light = wp.empty(count if with_light else 1, dtype=wp.vec3, device=d)
     visits = wp.empty(count, dtype=wp.int32, device=d)
+    moment = wp.empty(count if with_moment else 1, dtype=wp.mat33, device=d)
     if not with_light:
         radiance = light  # not read
     device_mod.launch(
@@ -244,9 +298,10 @@ def gather(problem, points: np.ndarray, normals: np.ndarray, distance: float,
         [wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(normals, np.float32), dtype=wp.vec3, device=d),
          tree.nodes, problem.surfels, float(distance), float(open_k), int(with_light), radiance,
-         access, bent, light, visits],
+         access, bent, light, visits, int(with_moment), moment],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
-    return Gather(access.numpy(), bent.numpy(), light.numpy() if with_light else None, visits.numpy())
+    return Gather(access.numpy(), bent.numpy(), light.numpy() if with_light else None, visits.numpy(),
+                  moment.numpy() if with_moment else None)
 
 
 # Distance of the senders' accessibility, in median element sizes (√area): measured on the sample

@@ -117,11 +117,13 @@ def compose(content: str, field: np.ndarray, direct: np.ndarray, receivers: Rece
 class Light:
     """The light at R receivers, float32[R,3] each: direct (irradiance/π; 0 for a solver that
     moves no light, AO), indirect (the solver's indirect lighting; 0 for AO and direct-only) and
-    output, the content the settings ask for (``compose``)."""
+    output, the content the settings ask for (``compose``); solved: (solver module, solution) it
+    came from, for targets that gather more from the solution (``core.directional``)."""
 
     direct: np.ndarray
     indirect: np.ndarray
     output: np.ndarray
+    solved: Optional[tuple] = None
 
 
 def direct_at(problem, receivers: Receivers) -> np.ndarray:
@@ -151,4 +153,5 @@ def light_at(problem, solver, solution, receivers: Receivers) -> Light:
     field = solver.evaluate(problem, solution, receivers)
     indirect = field if info.light else none
     return Light(direct=direct, indirect=indirect,
-                 output=compose(problem.settings.baked_content, field, direct, receivers))
+                 output=compose(problem.settings.baked_content, field, direct, receivers),
+                 solved=(solver, solution))

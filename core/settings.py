@@ -47,6 +47,8 @@ TEXEL_SHADOWS = ("adaptive", "fixed")
 # Directional bins per element over the sphere (core/directions.py), as the panel's enum holds them.
 DIRECTIONAL_BINS = ("64", "256", "1024")
 DEVICES = ("auto", "cpu", "cuda")
+DIRECTIONAL = ("none", "sh")
+PROBES = ("none", "grid")
 LIGHT_SELECTIONS = ("auto", "exact", "tree")
 GROUPS = ("solver", "lightmap", "output")
 # A Dask scheduler address (``scheduler``): a protocol and HOST:PORT, or local:N.
@@ -217,6 +219,18 @@ class Settings:
                                    "lightmap", choices=LIGHTMAP_FORMATS)
     pack_images: bool = _option(False, "Pack Images", "pack the lightmap images into the .blend "
                                 "file", "lightmap")
+    directional: str = _option("none", "Directional", "where each lightmap texel's light comes "
+                               "from: sh adds its L1 spherical harmonics (L0 = the plain lightmap, "
+                               "L1 along x, y, z per colour channel) to the page's EXR, for "
+                               "normal maps; none: the plain lightmap alone", "lightmap",
+                               choices=DIRECTIONAL)
+    probes: str = _option("none", "Light Probes", "light probes for objects that move through the "
+                          "baked scene: grid bakes the L2 spherical harmonics of the light arriving "
+                          "at points on a grid over the scene (or over a Light Probe Volume's "
+                          "box) into Probes.exr and Probes.json in the output folder; none: no "
+                          "probes", "output", choices=PROBES)
+    probe_spacing: float = _option(1.0, "Probe Spacing", "distance between light probes of the grid "
+                                   "(m)", "output", low=0.01, soft_high=10.0, length=True)
 
     @property
     def solver(self) -> str:
@@ -257,7 +271,7 @@ class Settings:
     @property
     def targets(self) -> tuple:
         """The names of the core targets ``target`` bakes into (``TARGET_OUTPUTS``)."""
-        return TARGET_OUTPUTS[self.target]
+        return TARGET_OUTPUTS[self.target] + (("probes",) if self.probes != "none" else ())
 
     def frame_list(self) -> Optional[list[int]]:
         """The frames of ``frames`` (A:B or A:B:STEP, B included), None when empty; raises
@@ -335,7 +349,8 @@ def describe(name: str) -> str:
     """One line on Settings field ``name``: its help, what each method is, its range."""
     opt = option(name)
     text = opt.help
-    if opt.choices is not None and name not in ("device", "layout", "lightmap_format"):
+    if opt.choices is not None and name not in ("device", "layout", "lightmap_format",
+                                                "directional", "probes"):
         text += ": " + "; ".join(f"{c}: {CHOICE_HELP[c]}" for c in opt.choices
                                 if c in CHOICE_HELP and c != "auto")  # auto is the device's
     if name == "method":

@@ -48,6 +48,22 @@ def write_exr(path: Path, rgb: np.ndarray, precision: str = "half") -> None:
     _write(oiio, path, spec, np.ascontiguousarray(np.flipud(rgba), np.float32))
 
 
+# The channels of a directional page (``write_directional_exr``), in order.
+DIRECTIONAL_CHANNELS = tuple(f"{band}.{c}" for band in ("L0", "L1x", "L1y", "L1z") for c in "RGB")
+
+
+def write_directional_exr(path: Path, rgb: np.ndarray, l1: np.ndarray, precision: str = "half") -> None:
+    """Write a directional page (``core.sh``): float32[H,W,3] L0 and float32[H,W,9] L1 (row 0
+    bottom) as an OpenEXR with the channels ``DIRECTIONAL_CHANNELS`` (zip compression)."""
+    oiio = _oiio()
+    h, w = rgb.shape[:2]
+    spec = oiio.ImageSpec(w, h, 12, oiio.HALF if precision == "half" else oiio.FLOAT)
+    spec.channelnames = DIRECTIONAL_CHANNELS
+    spec.attribute("compression", "zip")
+    pixels = np.concatenate([rgb, l1], axis=2)
+    _write(oiio, path, spec, np.ascontiguousarray(np.flipud(pixels), np.float32))
+
+
 def write_preview(path: Path, rgb: np.ndarray) -> None:
     """A PNG of float32[H,W,3]: exposure scaled so the 99th percentile maps to 1, Reinhard-style
     roll-off above, sRGB encoded, 8 bits."""

@@ -58,7 +58,9 @@ class Page:
     ``covered`` bool[H,W] texels on a chart (the rest is dilated padding or empty), the
     ``objects`` whose ``Lightmap`` UVs point into it and the lowest texel ``density`` among them
     (texels/m). ``name`` is its image's; ``tile`` its UDIM tile number when the image is a tile set
-    (an atlas of several pages), else None."""
+    (an atlas of several pages), else None. ``l1``: a directional bake's float32[H,W,9] L1 per
+    texel (``core.sh``: channels L1x.R, L1x.G, L1x.B, L1y.R … L1z.B; ``rgb`` is its L0), else
+    None."""
 
     name: str
     objects: list
@@ -66,6 +68,7 @@ class Page:
     covered: np.ndarray
     density: float
     tile: Optional[int] = None
+    l1: Optional[np.ndarray] = None
 
     @property
     def size(self) -> tuple:
@@ -351,7 +354,8 @@ def assemble(layout: Layout, grids: list, values: np.ndarray, problem,
              only: Optional[range] = None) -> LightmapResult:
     """The pages of ``layout`` (only: the indices of those ``grids`` are of, default all) from
     float32[N,3] ``values`` at the texel samples of ``grids`` (each page's ``raster.Texels``, in
-    order): resolved, dilated into padding, seams measured (stage ``dilate``)."""
+    order): resolved, dilated into padding, seams measured (stage ``dilate``). float32[N,12] values
+    are a directional bake's: RGB, then the page's ``l1``."""
     settings, s = problem.settings, problem.settings.supersample
     uvs = layout.uvs
 
@@ -359,10 +363,12 @@ def assemble(layout: Layout, grids: list, values: np.ndarray, problem,
         out, start, seam_error = [], 0, 0.0
         for k, texels in zip(range(len(layout.pages)) if only is None else only, grids):
             name, tile, objects, (w, h), density, members = layout.pages[k]
-            rgb, covered = _resolve(texels, values[start:start + texels.count], w, h, s)
+            texel_values, covered = _resolve(texels, values[start:start + texels.count], w, h, s)
             start += texels.count
-            rgb = dilate(rgb, covered, settings.padding)
-            out.append(Page(name, objects, rgb, covered, density, tile))
+            texel_values = dilate(texel_values, covered, settings.padding)
+            rgb = texel_values[..., :3]
+            l1 = texel_values[..., 3:] if texel_values.shape[2] > 3 else None
+            out.append(Page(name, objects, rgb, covered, density, tile, l1))
             for m in members:
                 seam_error = max(seam_error, seam_difference(
                     rgb, uvs[m.mesh_name], m.corner_triangles, problem.shading.corner[_triangles(m)]))
@@ -385,13 +391,14 @@ def collect(layout: Layout, made: list, seam_error: float, problem) -> LightmapR
 
 
 def _resolve(texels: raster.Texels, values: np.ndarray, w: int, h: int, s: int):
-    """Page float32[H,W,3] and coverage bool[H,W] from supersampled texel values (mean of each
-    texel's covered sub-samples)."""
-    acc = np.zeros((h * s * w * s, 3), np.float64)
+    """Page float32[H,W,C] and coverage bool[H,W] from supersampled texel values float32[N,C]
+    (mean of each texel's covered sub-samples)."""
+    c = values.shape[1]
+    acc = np.zeros((h * s * w * s, c), np.float64)
     cnt = np.zeros(h * s * w * s, np.float64)
     acc[texels.index] = values
     cnt[texels.index] = 1.0
-    acc = acc.reshape(h, s, w, s, 3).sum(axis=(1, 3))
+    acc = acc.reshape(h, s, w, s, c).sum(axis=(1, 3))
     cnt = cnt.reshape(h, s, w, s).sum(axis=(1, 3))
     covered = cnt > 0
     rgb = np.where(covered[..., None], acc / np.maximum(cnt, 1.0)[..., None], 0.0)

@@ -34,6 +34,8 @@ TARGETS = {info.name: info for info in (
     TargetInfo("vertices", "Per shading vertex: the values a color attribute holds"),
     TargetInfo("lightmap", "Per lightmap texel: pages laid out by xatlas (or the objects' own "
                "Lightmap UVs), rasterised, dilated into their padding"),
+    TargetInfo("probes", "Light probes: the spherical harmonics of the light arriving at points "
+               "on a grid in space, for objects that move through the scene"),
 )}
 
 

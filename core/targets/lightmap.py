@@ -11,6 +11,7 @@ from typing import Optional
 
 import numpy as np
 
+from .. import directional
 from .. import receivers as receivers_mod
 from ..lightmap import Layout, LightmapRequest, LightmapResult, pages
 
@@ -74,6 +75,12 @@ class Target:
                                   whole=int(sum(self.counts)))
 
     def finish(self, problem, receivers: PageReceivers, light: receivers_mod.Light) -> LightmapResult:
-        result = pages.assemble(receivers.layout, receivers.grids, light.output, problem, self.only)
+        """The pages; with ``directional`` sh each page also holds its texels' L1
+        (``core.directional``)."""
+        values = light.output
+        if problem.settings.directional == "sh":
+            l1 = directional.texel_l1(problem, receivers, light)
+            values = np.concatenate([values, l1.transpose(0, 2, 1).reshape(len(values), 9)], axis=1)
+        result = pages.assemble(receivers.layout, receivers.grids, values, problem, self.only)
         problem.counts["texels"] = result.texels
         return result
