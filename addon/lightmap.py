@@ -21,7 +21,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core.lightmap import LightmapRequest, LightmapObject, files
+from ..core.lightmap import LightmapRequest, LightmapObject, encodings, files
 from .extract import ExtractionError
 from .outputs import OutputError, Staging, check_folder
 from .tags import IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, UV_TAG
@@ -140,7 +140,8 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
 def write_files(result, settings, staging=None, frame=None, folder=None) -> dict[str, Path]:
     """Write each page as ``<folder>/<page>.exr`` (a tile of a UDIM set as ``<image>.<tile>.exr``;
     ``<page>.<frame>.exr`` for a frame of an animation, four digits: a Blender image sequence)
-    plus a ``.png`` preview; {page stem: exr path}.
+    plus a ``.png`` preview; {page stem: path of the file Blender loads}. ``.hdr`` instead of
+    ``.exr`` for the ``hdr`` format; an 8-bit format (rgbm, rgbd) adds ``<page>.<format>.png``.
 
     All files are written under temporary names, read back, then moved into place together: on
     any failure (OutputError) the folder is as it was. ``staging``: an ``outputs.Staging`` the
@@ -161,9 +162,15 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
                                   f"(a UDIM tile set), which Blender cannot play as an image "
                                   f"sequence: bake with --atlas-pages one or --layout per_object")
             stem = _file_stem(page) + suffix
-            paths[page.stem] = folder / f"{stem}.exr"
+            fmt = settings.lightmap_format
+            paths[page.stem] = folder / f"{stem}{encodings.SUFFIX[fmt]}"
+            if fmt in encodings.EIGHT_BIT:  # Blender shows the float page: a half EXR beside
+                paths[page.stem] = folder / f"{stem}.exr"
+                with staging.writing(folder / f"{stem}.{fmt}.png") as temp:
+                    encodings.write(temp, page.rgb, fmt)
+                    files.verify(temp, page.size)
             with staging.writing(paths[page.stem]) as temp:
-                files.write_exr(temp, page.rgb, settings.lightmap_format)
+                encodings.write(temp, page.rgb, "half" if fmt in encodings.EIGHT_BIT else fmt)
                 files.verify(temp, page.size)
             with staging.writing(folder / f"{stem}.png") as temp:
                 files.write_preview(temp, page.rgb)
