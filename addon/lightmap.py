@@ -24,7 +24,7 @@ import numpy as np
 from ..core.lightmap import LightmapRequest, LightmapObject, encodings, files
 from .extract import ExtractionError
 from .outputs import OutputError, Staging, check_folder
-from .tags import IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, UV_TAG
+from .tags import IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, OBJECT_TAG, UV_TAG
 from .write import name_clash
 
 UV_NAME = "Lightmap"
@@ -207,6 +207,9 @@ class LightmapWrites:
                                                 frames is not None)
         for mat, page in self.hookups:
             warnings += _hook_up(mat, images[page], settings.hookup == "multiply", frames)
+        for page in result.pages:  # which image each object is on (what the glTF export reads)
+            for name in page.objects:
+                _object(name)[OBJECT_TAG] = page.name
         return warnings
 
 
@@ -369,6 +372,9 @@ def clear(objects) -> int:
         for node in [n for n in nodes if n.name.startswith(NODE_PREFIX)]:
             nodes.remove(node)
             removed += 1
+    for ob in objects:
+        if ob.get(OBJECT_TAG) is not None:
+            del ob[OBJECT_TAG]
     for me in {ob.data for ob in objects if ob.type == "MESH"}:
         if me.get(UV_TAG) and UV_NAME in me.uv_layers:
             me.uv_layers.remove(me.uv_layers[UV_NAME])
