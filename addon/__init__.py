@@ -6,7 +6,7 @@ import threading
 
 import bpy
 
-from . import cli, live, operator, panel, props
+from . import cli, gltf, live, operator, panel, props
 
 _cli_handle = None
 
@@ -41,6 +41,7 @@ def register() -> None:
     _use_extension_warp_cache()
     _compile_kernels_ahead()
     props.register()
+    gltf.register()
     live.register()
     for cls in operator.classes + panel.classes:
         bpy.utils.register_class(cls)
@@ -58,4 +59,5 @@ def unregister() -> None:
     for cls in reversed(operator.classes + panel.classes):
         bpy.utils.unregister_class(cls)
     live.unregister()
+    gltf.unregister()
     props.unregister()

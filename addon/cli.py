@@ -1,5 +1,6 @@
 """Command line: ``python -m radiosity_baker bake FILE.blend [options]`` (bpy module) and
-``blender -c radiosity_baker bake FILE.blend [options]`` (register_cli_command).
+``blender -c radiosity_baker bake FILE.blend [options]`` (register_cli_command); ``export FILE.blend
+OUT.glb`` writes a baked file's scene as glTF with its lightmaps.
 
 Settings start from core ``Settings`` defaults; the options below override them. The input file
 is never written: results reach disk only through ``--save`` (which may name the input on purpose).
@@ -26,7 +27,7 @@ from ..core import BakeCancelled, Settings, device
 from ..core import settings as core_settings
 from ..core.errors import SettingsError
 from ..core.lightmap import files
-from . import lightmap
+from . import gltf, lightmap
 from .job import USER_ERRORS, BakeJob
 from .outputs import OutputError, Staging, check_file, same_file
 
@@ -95,6 +96,20 @@ def _parser() -> argparse.ArgumentParser:
                       help="write timings, counts, device, settings and versions as JSON")
     bake.add_argument("--preview", metavar="OUT.png", type=Path,
                       help="render the camera view of the baked attribute to a PNG (Cycles)")
+    bake.add_argument("--gltf", metavar="OUT.glb", type=Path,
+                      help="export the baked scene as a GLB with its lightmaps (MOZ_lightmap, "
+                           "encoded as --lightmap-format says) and the color attribute (COLOR_0)")
+    export = commands.add_parser("export", help="export FILE.blend as a GLB with the lightmaps "
+                                                "of its baked objects (the file is left unchanged)")
+    export.add_argument("blend", metavar="FILE.blend", help="a .blend file baked with lightmaps")
+    export.add_argument("gltf", metavar="OUT.glb", type=Path, help="the GLB file to write")
+    export.add_argument("--lightmap-format", dest="lightmap_format", choices=gltf.ENCODINGS,
+                        default="rgbm", help="how the lightmap textures are stored "
+                                             "(default: %(default)s)")
+    export.add_argument("--color-attribute", metavar="NAME",
+                        help="also export this color attribute as COLOR_0")
+    export.add_argument("--no-lightmaps", action="store_true",
+                        help="leave the lightmaps out (the Lightmap UV maps stay)")
     warm = commands.add_parser("compile-kernels", help="compile the Warp kernels now (kept in "
                                                        "Warp's cache), so the first bake is not slow")
     warm.add_argument("--device", choices=core_settings.DEVICES, default="auto")
@@ -119,7 +134,8 @@ def main(argv: list[str]) -> int:
     except SystemExit as exc:  # --help
         return exc.code or 0
     try:
-        return _compile_kernels(args) if args.command == "compile-kernels" else _bake(args)
+        run = {"compile-kernels": _compile_kernels, "export": _export}.get(args.command, _bake)
+        return run(args)
     except (UsageError, SettingsError, OutputError) as exc:
         return _error(str(exc), 2)
     except (BakeCancelled, KeyboardInterrupt):
@@ -151,10 +167,12 @@ def _bake(args) -> int:
     blend = Path(args.blend).resolve()
     if not blend.is_file():
         raise UsageError(f"no such .blend file: {args.blend}")
-    given = {name: getattr(args, name) for name in ("save", "report", "preview")
+    given = {name: getattr(args, name) for name in ("save", "report", "preview", "gltf")
              if getattr(args, name) is not None}
     _check_distinct(Path(args.blend), given)
     outputs = {name: path.resolve() for name, path in given.items()}
+    if "gltf" in outputs:
+        _check_glb(outputs["gltf"])
     for path in outputs.values():
         check_file(path)
     # --device cuda without a GPU: a bad argument, said now; else the one line naming the device
@@ -179,6 +197,9 @@ def _bake(args) -> int:
             warn(message)
         if "save" in outputs:
             _save(staging, outputs["save"])
+        if "gltf" in outputs:
+            _write_gltf(staging, outputs["gltf"], settings.lightmap_format,
+                        settings.attribute if "vertices" in settings.targets else None)
         if "preview" in outputs:  # after saving: the file never holds the preview's temporary data
             from .preview import render_preview
             with staging.writing(outputs["preview"]) as temp:
@@ -219,6 +240,44 @@ def _check_lightmap_folder(folder: Path, blend: Path, outputs: dict) -> None:
             what = "the input file" if name == "input" else f"--{name}"
             raise UsageError(f"{what} {path} lies in the lightmap folder {folder} under a name "
                              f"the lightmap files take: choose another --output or file name")
+
+
+def _export(args) -> int:
+    blend = Path(args.blend).resolve()
+    if not blend.is_file():
+        raise UsageError(f"no such .blend file: {args.blend}")
+    target = args.gltf.resolve()
+    _check_glb(target)
+    check_file(target)
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+    except RuntimeError as exc:
+        raise UsageError(f"cannot open {blend}: {_first_line(exc)}") from None
+    with Staging() as staging:
+        _write_gltf(staging, target, args.lightmap_format, args.color_attribute,
+                    lightmaps=not args.no_lightmaps)
+        staging.commit()
+    print(f"{PROG}: exported {target}")
+    return 0
+
+
+def _check_glb(path: Path) -> None:
+    if path.suffix.lower() != ".glb":
+        raise UsageError(f"the glTF output must be a .glb file, not {path.name}")
+
+
+def _write_gltf(staging: Staging, target: Path, encoding: str, color_attribute,
+                lightmaps: bool = True) -> None:
+    """Export the open scene to the GLB ``target`` through Blender's glTF exporter with our
+    MOZ_lightmap extension (``addon.gltf``) and, when named, ``color_attribute`` as COLOR_0."""
+    colors = dict(export_vertex_color="NAME", export_vertex_color_name=color_attribute) \
+        if color_attribute else dict(export_vertex_color="NONE")
+    with staging.writing(target) as temp, gltf.found_by_gltf(encoding, lightmaps):
+        try:
+            bpy.ops.export_scene.gltf(filepath=str(temp), export_format="GLB",
+                                      export_texcoords=True, export_cameras=True, **colors)
+        except RuntimeError as exc:
+            raise OutputError(f"cannot write {target}: {_first_line(exc)}") from None
 
 
 # A whole .blend file ends with an ENDB block (its code, then a header of zeros: 16 bytes or more)

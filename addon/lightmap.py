@@ -21,10 +21,10 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core.lightmap import ATLAS_NAME, LightmapObject, LightmapRequest, budget, files
+from ..core.lightmap import ATLAS_NAME, LightmapObject, LightmapRequest, budget, encodings, files
 from .extract import ExtractionError
 from .outputs import OutputError, Staging, check_folder, same_file
-from .tags import IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, UV_TAG
+from .tags import IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, OBJECT_TAG, UV_TAG
 from .write import name_clash
 
 UV_NAME = "Lightmap"
@@ -141,7 +141,8 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
 def write_files(result, settings, staging=None, frame=None, folder=None) -> dict[str, Path]:
     """Write each page as ``<folder>/<page>.exr`` (a tile of a UDIM set as ``<image>.<tile>.exr``;
     ``<page>.<frame>.exr`` for a frame of an animation, four digits: a Blender image sequence)
-    plus a ``.png`` preview; {page stem: exr path}.
+    plus a ``.png`` preview; {page stem: path of the file Blender loads}. ``.hdr`` instead of
+    ``.exr`` for the ``hdr`` format; an 8-bit format (rgbm, rgbd) adds ``<page>.<format>.png``.
 
     All files are written under temporary names, read back, then moved into place together: on
     any failure (OutputError) the folder is as it was. ``staging``: an ``outputs.Staging`` the
@@ -163,9 +164,15 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
                                   f"(a UDIM tile set), which Blender cannot play as an image "
                                   f"sequence: bake with --atlas-pages one or --layout per_object")
             stem = names[page.name] + ("" if page.tile is None else f".{page.tile}") + suffix
-            paths[page.stem] = folder / f"{stem}.exr"
+            fmt = settings.lightmap_format
+            paths[page.stem] = folder / f"{stem}{encodings.SUFFIX[fmt]}"
+            if fmt in encodings.EIGHT_BIT:  # Blender shows the float page: a half EXR beside
+                paths[page.stem] = folder / f"{stem}.exr"
+                with staging.writing(folder / f"{stem}.{fmt}.png") as temp:
+                    encodings.write(temp, page.rgb, fmt)
+                    files.verify(temp, page.size)
             with staging.writing(paths[page.stem]) as temp:
-                files.write_exr(temp, page.rgb, settings.lightmap_format)
+                encodings.write(temp, page.rgb, "half" if fmt in encodings.EIGHT_BIT else fmt)
                 files.verify(temp, page.size)
             if page.l1 is not None:  # a directional bake: its L0 and L1 beside the page
                 with staging.writing(folder / f"{stem}.sh.exr") as temp:
@@ -206,6 +213,9 @@ class LightmapWrites:
                                                 frames is not None)
         for mat, page in self.hookups:
             warnings += _hook_up(mat, images[page], settings.hookup == "multiply", frames)
+        for page in result.pages:  # which image each object is on (what the glTF export reads)
+            for name in page.objects:
+                _object(name)[OBJECT_TAG] = page.name
         return warnings
 
 
@@ -399,6 +409,9 @@ def clear(objects) -> int:
         for node in [n for n in nodes if n.name.startswith(NODE_PREFIX)]:
             nodes.remove(node)
             removed += 1
+    for ob in objects:
+        if ob.get(OBJECT_TAG) is not None:
+            del ob[OBJECT_TAG]
     for me in {ob.data for ob in objects if ob.type == "MESH"}:
         if me.get(UV_TAG) and UV_NAME in me.uv_layers:
             me.uv_layers.remove(me.uv_layers[UV_NAME])

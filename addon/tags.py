@@ -8,3 +8,5 @@ IMAGE_TAG = "radiosity_baker_lightmap"
 # Material nodes a bake added are named with this prefix.
 NODE_PREFIX = "RB Lightmap"
 NODE_UV, NODE_IMAGE, NODE_MULTIPLY = (f"{NODE_PREFIX} UV", f"{NODE_PREFIX}", f"{NODE_PREFIX} Multiply")
+# Object custom property naming the lightmap image (page) a bake put the object on.
+OBJECT_TAG = "radiosity_baker_page"

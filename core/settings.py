@@ -41,7 +41,7 @@ TARGET_OUTPUTS = {"vertex_colors": ("vertices",), "lightmap": ("lightmap",),
 LAYOUTS = ("atlas", "per_object")
 ATLAS_PAGES = ("many", "one")
 HOOKUPS = ("none", "node", "multiply")
-LIGHTMAP_FORMATS = ("half", "float")
+LIGHTMAP_FORMATS = ("half", "float", "hdr", "rgbm", "rgbd")
 TEXEL_INDIRECT = ("gather", "interpolate")
 TEXEL_SHADOWS = ("adaptive", "fixed")
 # Directional bins per element over the sphere (core/directions.py), as the panel's enum holds them.
@@ -215,7 +215,9 @@ class Settings:
                                  "penumbra (adaptive texel shadows: elsewhere one per texel, or "
                                  "the light samples where a shadow edge passes)", "lightmap", low=1,
                                  soft_high=1024)
-    lightmap_format: str = _option("half", "EXR Format", "precision of the EXR channels",
+    lightmap_format: str = _option("half", "Lightmap Format", "lightmap files: OpenEXR of half or "
+                                   "float channels; hdr: Radiance RGBE; rgbm, rgbd: 8-bit PNG for "
+                                   "engines without float textures (beside a half EXR for Blender)",
                                    "lightmap", choices=LIGHTMAP_FORMATS)
     pack_images: bool = _option(False, "Pack Images", "pack the lightmap images into the .blend "
                                 "file", "lightmap")
