@@ -1,13 +1,18 @@
 """The baked lightmaps in Blender's own glTF exporter (``io_scene_gltf2``), as ``MOZ_lightmap``.
 
-Blender's exporter writes every UV map, so an object's ``Lightmap`` UV map becomes
-``TEXCOORD_<its index>`` (``TEXCOORD_1`` beside one UV map of the user's). This user extension adds
-to each material of a lightmapped object ``extensions.MOZ_lightmap = {index, texCoord, intensity,
-extras}``: ``index`` a texture holding the object's lightmap page encoded as ``encoding`` says
-(rgbm/rgbd: 8-bit PNG; hdr: Radiance RGBE, ``image/vnd.radiance``; half/float: OpenEXR,
-``image/x-exr``), ``texCoord`` the UV map's index, ``intensity`` 1 (the texels hold lighting =
-irradiance/π, as Hubs' MOZ_lightmap loader reads them), ``extras`` {"encoding", "range"} (range:
-the largest value an 8-bit page holds, also in the PNG's metadata).
+This user extension adds to each material of a lightmapped object ``extensions.MOZ_lightmap =
+{index, texCoord: 1, intensity, extras}``: ``index`` a texture holding the object's lightmap page
+encoded as ``encoding`` says (rgbm/rgbd: 8-bit PNG; hdr: Radiance RGBE, ``image/vnd.radiance``;
+half/float: OpenEXR, ``image/x-exr``), ``intensity`` 1 (the texels hold lighting = irradiance/π,
+as Hubs' MOZ_lightmap loader reads them), ``extras`` {"encoding", "range"} (range: the largest
+value an 8-bit page holds, also in the PNG's metadata). A lightmapped object without a material
+gets, in the file only, a grey 0.8 diffuse one (what the bake took it for) carrying its lightmap.
+
+Blender's exporter numbers UV maps in their order; engines (Unity, Godot, three.js) take the
+second set as the lightmap's. So the export renumbers each mesh's sets: ``TEXCOORD_0`` the first
+UV map other than ``Lightmap`` (``Lightmap`` again when it is the only one), ``TEXCOORD_1`` the
+``Lightmap`` UV map, then the other UV maps in order; material textures follow their UV map
+(a material's copy in the file where its numbers change). The .blend is not touched.
 
 The exporter finds the class through the enabled add-on's top-level module (``glTF2ExportUserExtension``
 there, see the package's ``__init__``); the command line's ``export`` enables it for the export
@@ -17,6 +22,7 @@ on/off and the encoding (scene properties ``radiosity_baker_gltf``).
 from __future__ import annotations
 
 import contextlib
+import copy
 import sys
 import tempfile
 from pathlib import Path
@@ -63,8 +69,9 @@ def _options() -> tuple[bool, str]:
 
 
 class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter looks for
-    """One export: adds ``MOZ_lightmap`` to the materials of lightmapped objects (one texture per
-    lightmap page, shared by its materials)."""
+    """One export: puts each mesh's ``Lightmap`` UV map at ``TEXCOORD_1`` and adds ``MOZ_lightmap``
+    to the materials of lightmapped objects (one texture per lightmap page, shared by its
+    materials; a default material for an object without one)."""
 
     def __init__(self):
         from io_scene_gltf2.io.com import gltf2_io
@@ -74,19 +81,70 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
         self._io, self._extension, self._binary = gltf2_io, Extension, BinaryData
         self.enabled, self.encoding = _options()
         self._textures: dict = {}  # image name -> (glTF texture, extras)
+        self._renumbered: dict = {}  # (id(glTF material), renumbering) -> (material, its copy)
+        self._defaults: dict = {}  # image name -> default glTF material carrying that lightmap
 
     def gather_material_hook(self, gltf2_material, blender_material, export_settings):
         if not self.enabled or gltf2_material is None:
             return
-        log = export_settings["log"]
         found = _lightmaps_of(blender_material)
         if not found:
             return
-        (image, tex_coord), *others = found
-        if any(o != (image, tex_coord) for o in others):
-            log.warning(f"material {blender_material.name} is used by objects on different "
-                        f"lightmaps or Lightmap UV indices: it carries {image.name}; give the "
-                        f"objects their own materials")
+        image, *others = found
+        if any(o != image for o in others):
+            export_settings["log"].warning(
+                f"material {blender_material.name} is used by objects on different lightmaps: it "
+                f"carries {image.name}; give the objects their own materials")
+        self._add_lightmap(gltf2_material, image, export_settings)
+
+    def gather_mesh_hook(self, gltf2_mesh, blender_mesh, blender_object, vertex_groups, modifiers,
+                         materials, export_settings):
+        """Renumber the TEXCOORD sets of a mesh with a ``Lightmap`` UV map (:func:`texcoord_order`)
+        and the texCoord of its materials' textures with them."""
+        if not self.enabled:
+            return
+        names = [layer.name for layer in blender_mesh.uv_layers]
+        order = texcoord_order(names)
+        if order is None or order == list(range(len(names))):
+            return
+        renumber = {b: order.index(b) for b in range(len(names))}  # Blender index -> glTF index
+        for prim in gltf2_mesh.primitives:
+            attributes = prim.attributes  # may be shared with other primitives: replaced, not edited
+            if not all(f"TEXCOORD_{b}" in attributes for b in range(len(names))):
+                continue  # UVs not exported (or loose edges and points)
+            kept = {k: v for k, v in attributes.items()
+                    if not k.startswith("TEXCOORD_") or int(k[len("TEXCOORD_"):]) >= len(names)}
+            prim.attributes = {**kept, **{f"TEXCOORD_{g}": attributes[f"TEXCOORD_{b}"]
+                                          for g, b in enumerate(order)}}
+            if prim.material is not None:
+                prim.material = self._renumbered_material(prim.material, renumber)
+
+    def gather_node_hook(self, gltf2_node, blender_object, export_settings):
+        """Give the material-less primitives of a lightmapped object a default material with its
+        lightmap."""
+        if not self.enabled or gltf2_node.mesh is None or blender_object is None:
+            return
+        image = _page_image(blender_object)
+        if image is None:
+            return
+        for prim in gltf2_node.mesh.primitives:
+            if prim.material is None:
+                prim.material = self._default_material(image, export_settings)
+                export_settings["log"].info(
+                    f"object {blender_object.name} has no material: exported with a grey 0.8 one "
+                    f"carrying its lightmap")
+            elif prim.material in self._defaults.values() and \
+                    prim.material is not self._defaults.get(image.name):
+                export_settings["log"].warning(
+                    f"object {blender_object.name} shares its mesh with an object on another "
+                    f"lightmap: give it its own mesh data")
+
+    def _add_lightmap(self, gltf2_material, image, export_settings) -> None:
+        """Add ``MOZ_lightmap`` with ``image`` (our lightmap page) to ``gltf2_material``."""
+        log = export_settings["log"]
+        if not export_settings["gltf_texcoords"]:
+            log.warning(f"UVs are not exported: no lightmap on material {gltf2_material.name}")
+            return
         if image.source == "TILED":
             log.warning(f"lightmap {image.name} is a UDIM tile set, which glTF cannot hold: "
                         f"bake with --atlas-pages one or --layout per_object to export it")
@@ -94,9 +152,34 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
         texture, extras = self._texture(image)
         extensions = gltf2_material.extensions or {}
         extensions[EXTENSION] = self._extension(
-            EXTENSION, {"index": texture, "texCoord": tex_coord, "intensity": 1.0,
-                        "extras": extras}, required=False)
+            EXTENSION, {"index": texture, "texCoord": 1, "intensity": 1.0, "extras": extras},
+            required=False)
         gltf2_material.extensions = extensions
+
+    def _default_material(self, image, export_settings):
+        """The glTF material standing in for Blender's default on objects lit by ``image``:
+        base colour 0.8 (the bake's albedo for them), not metallic, roughness 0.5."""
+        if image.name not in self._defaults:
+            pbr = self._io.MaterialPBRMetallicRoughness(
+                base_color_factor=[0.8, 0.8, 0.8, 1.0], base_color_texture=None, extensions=None,
+                extras=None, metallic_factor=0.0, metallic_roughness_texture=None,
+                roughness_factor=0.5)
+            material = self._io.Material(
+                alpha_cutoff=None, alpha_mode=None, double_sided=None, emissive_factor=None,
+                emissive_texture=None, extensions=None, extras=None,
+                name=f"Radiosity Baker default ({image.name})", normal_texture=None,
+                occlusion_texture=None, pbr_metallic_roughness=pbr)
+            self._add_lightmap(material, image, export_settings)
+            self._defaults[image.name] = material
+        return self._defaults[image.name]
+
+    def _renumbered_material(self, material, renumber: dict):
+        """``material``, or its copy whose textures' texCoord b is ``renumber[b]`` (one copy per
+        material and renumbering)."""
+        key = (id(material), tuple(sorted(renumber.items())))
+        if key not in self._renumbered:
+            self._renumbered[key] = (material, _renumbered(material, renumber))
+        return self._renumbered[key][1]
 
     def _texture(self, image):
         """(glTF texture, extras) of Blender ``image``, encoded once per export."""
@@ -108,6 +191,56 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
                                        sampler=None, source=source)
             self._textures[image.name] = (texture, extras)
         return self._textures[image.name]
+
+
+def texcoord_order(uv_names: list[str]) -> list[int] | None:
+    """The Blender UV map index each glTF ``TEXCOORD_<i>`` of a mesh takes, for a mesh whose UV
+    maps are ``uv_names`` (Blender's order): the first UV map other than ``Lightmap`` (the
+    ``Lightmap`` UV map again when it is the only one), then the ``Lightmap`` UV map, then the
+    other UV maps in order. None without a ``Lightmap`` UV map. E.g. ["Lightmap"] -> [0, 0];
+    ["A", "Lightmap"] -> [0, 1]; ["Lightmap", "A"] -> [1, 0]; ["A", "B", "Lightmap"] -> [0, 2, 1]."""
+    if UV_NAME not in uv_names:
+        return None
+    k = uv_names.index(UV_NAME)
+    others = [b for b in range(len(uv_names)) if b != k]
+    return [others[0], k, *others[1:]] if others else [k, k]
+
+
+def _renumbered(node, renumber: dict):
+    """``node`` (a glTF object of the exporter, dict or list), or a copy of it and of the objects on
+    the way to each ``tex_coord`` / ``texCoord`` it holds (textures, ``KHR_texture_transform``)
+    that ``renumber`` changes ({old index: new index}); our own ``MOZ_lightmap`` is left as is.
+    What is not on such a way (textures, images) stays shared."""
+    if isinstance(node, list):
+        new = [_renumbered(v, renumber) for v in node]
+        return new if any(a is not b for a, b in zip(new, node)) else node
+    if isinstance(node, dict):
+        fields = node
+    elif hasattr(node, "__dict__") and not isinstance(node, (type, bpy.types.ID)):
+        fields = vars(node)
+    else:
+        return node
+    changes = {}
+    for key, value in fields.items():
+        if key == EXTENSION:
+            continue
+        if key in ("tex_coord", "texCoord") and isinstance(value, (int, type(None))):
+            old = value or 0  # unset: set 0
+            if renumber.get(old, old) != old:
+                changes[key] = renumber[old]
+        else:
+            new = _renumbered(value, renumber)
+            if new is not value:
+                changes[key] = new
+    if not changes:
+        return node
+    node = copy.copy(node)
+    for key, value in changes.items():
+        if isinstance(node, dict):
+            node[key] = value
+        else:
+            setattr(node, key, value)
+    return node
 
 
 class glTF2ImportUserExtension:  # noqa: N801 - the name Blender's glTF importer looks for
@@ -150,20 +283,27 @@ class glTF2ImportUserExtension:  # noqa: N801 - the name Blender's glTF importer
 
 
 def _lightmaps_of(material) -> list:
-    """[(lightmap image, Lightmap UV index)] of the objects using ``material`` that a bake
-    lightmapped (their ``OBJECT_TAG``), in object order."""
+    """The lightmap images of the objects using ``material`` that a bake lightmapped (their
+    ``OBJECT_TAG``) and that have a ``Lightmap`` UV map, in object order."""
     material = material.original
     found = []
     for ob in bpy.data.objects:
-        page = ob.get(OBJECT_TAG)
-        if page is None or ob.type != "MESH" or not any(
+        if ob.type != "MESH" or not any(
                 s.material is not None and s.material.original == material for s in ob.material_slots):
             continue
-        image = next((im for im in bpy.data.images if im.get(IMAGE_TAG) == page), None)
-        index = ob.data.uv_layers.find(UV_NAME)
-        if image is not None and index >= 0:
-            found.append((image, index))
+        image = _page_image(ob)
+        if image is not None:
+            found.append(image)
     return found
+
+
+def _page_image(ob):
+    """The lightmap image of mesh object ``ob`` (its ``OBJECT_TAG``), or None when a bake did not
+    lightmap it, the image is gone, or the object has no ``Lightmap`` UV map."""
+    page = ob.original.get(OBJECT_TAG)
+    if page is None or ob.type != "MESH" or ob.data.uv_layers.find(UV_NAME) < 0:
+        return None
+    return next((im for im in bpy.data.images if im.get(IMAGE_TAG) == page), None)
 
 
 def encode_image(image, encoding: str) -> tuple[bytes, str, dict]:

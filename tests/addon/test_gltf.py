@@ -1,10 +1,12 @@
 """The bake in Blender's glTF exporter: MOZ_lightmap on the materials of lightmapped objects, the
-Lightmap UV map as a TEXCOORD, from ``bake --gltf`` and ``export``; and back through the importer."""
+Lightmap UV map as TEXCOORD_1, from ``bake --gltf``, ``export`` and File › Export with the add-on
+enabled; and back through the importer."""
 import hashlib
 import json
 import struct
 from pathlib import Path
 
+import addon_utils
 import bpy
 import numpy as np
 import pytest
@@ -12,9 +14,11 @@ import pytest
 from radiosity_baker.addon import cli, gltf
 from radiosity_baker.core.lightmap import encodings, files
 
+import radiosity_baker
 from scenes import lit_ground
 
 FAST = ["--method", "direct", "--samples", "4", "--target", "both", "--texel-density", "6"]
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_blends"
 
 
 def read_glb(path: Path) -> tuple[dict, bytes]:
@@ -22,6 +26,19 @@ def read_glb(path: Path) -> tuple[dict, bytes]:
     data = path.read_bytes()
     n = struct.unpack("<I", data[12:16])[0]
     return json.loads(data[20:20 + n]), data[20 + n + 8:]
+
+
+def sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def accessor(doc: dict, binary: bytes, index: int) -> np.ndarray:
+    """float32[count, 2] of a VEC2 float accessor (tightly packed, as Blender writes them)."""
+    acc = doc["accessors"][index]
+    assert acc["type"] == "VEC2" and acc["componentType"] == 5126
+    view = doc["bufferViews"][acc["bufferView"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    return np.frombuffer(binary, np.float32, acc["count"] * 2, start).reshape(-1, 2)
 
 
 def image_bytes(doc: dict, binary: bytes, index: int) -> bytes:
@@ -42,11 +59,52 @@ def baked(empty_scene, tmp_path):
     blend = tmp_path / "in.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     glb, saved, maps = tmp_path / "out.glb", tmp_path / "out.blend", tmp_path / "maps"
-    before = hashlib.sha256(blend.read_bytes()).hexdigest()
+    before = sha256(blend)
     assert cli.main(["bake", str(blend), *FAST, "--output", str(maps), "--lightmap-format", "rgbm",
                      "--gltf", str(glb), "--save", str(saved)]) == 0
-    assert hashlib.sha256(blend.read_bytes()).hexdigest() == before
+    assert sha256(blend) == before
     return blend, saved, glb, maps
+
+
+@pytest.fixture(scope="module")
+def samples(tmp_path_factory):
+    """The sample scenes baked into lightmaps with ``bake --gltf``: {name: (saved .blend, GLB)};
+    the sample files are checked unchanged."""
+    out, baked = tmp_path_factory.mktemp("samples"), {}
+    for name in ("cornell_box", "lamp_scene"):
+        blend = SAMPLES / f"{name}.blend"
+        before = sha256(blend)
+        saved, glb = out / f"{name}.blend", out / f"{name}.glb"
+        assert cli.main(["bake", str(blend), "--method", "direct", "--samples", "4", "--target",
+                         "lightmap", "--texel-density", "6", "--output", str(out / f"{name}_maps"),
+                         "--gltf", str(glb), "--save", str(saved)]) == 0
+        assert sha256(blend) == before
+        baked[name] = saved, glb
+    return baked
+
+
+@pytest.fixture
+def addon_enabled():
+    """The package enabled by Blender's add-on manager (``addon_utils``, an entry in
+    ``preferences.addons``) as File › Export finds it in Blender, instead of conftest's register."""
+    radiosity_baker.unregister()
+    try:
+        addon_utils.enable("radiosity_baker", default_set=True, handle_error=_raise)
+        assert "radiosity_baker" in bpy.context.preferences.addons
+        yield
+    finally:
+        addon_utils.disable("radiosity_baker", default_set=True, handle_error=_raise)
+        radiosity_baker.register()
+
+
+def _raise(exc):
+    raise exc
+
+
+def lightmapped_uv_maps() -> dict:
+    """{mesh object: its UV map names} of the objects a bake lightmapped, in the open file."""
+    return {ob.name: [uv.name for uv in ob.data.uv_layers]
+            for ob in bpy.data.objects if ob.get("radiosity_baker_page")}
 
 
 def test_bake_gltf_writes_moz_lightmap_on_texcoord_1_and_color_0(baked):
@@ -116,3 +174,61 @@ def test_reimported_glb_keeps_both_uv_maps_and_the_lightmap_image(baked):
             + 1e-3 * m + 1e-6).all()
     mat = bpy.data.materials["Grey"]
     assert mat.node_tree.nodes["RB Lightmap"].image == image
+
+
+def test_texcoord_order_puts_the_lightmap_uv_map_second():
+    assert gltf.texcoord_order(["Lightmap"]) == [0, 0]
+    assert gltf.texcoord_order(["UVMap", "Lightmap"]) == [0, 1]
+    assert gltf.texcoord_order(["Lightmap", "UVMap"]) == [1, 0]
+    assert gltf.texcoord_order(["A", "B", "Lightmap", "C"]) == [0, 2, 1, 3]
+    assert gltf.texcoord_order(["UVMap"]) is None
+
+
+def test_cornell_box_lightmap_is_texcoord_1_with_a_copy_as_texcoord_0(samples):
+    saved, glb = samples["cornell_box"]
+    doc, binary = read_glb(glb)
+    for mesh in doc["meshes"]:  # every object of the box is baked; 'Lightmap' is its only UV map
+        for prim in mesh["primitives"]:
+            attrs = prim["attributes"]
+            assert attrs["TEXCOORD_0"] == attrs["TEXCOORD_1"] and "TEXCOORD_2" not in attrs
+            assert doc["materials"][prim["material"]]["extensions"]["MOZ_lightmap"]["texCoord"] == 1
+    assert accessor(doc, binary, attrs["TEXCOORD_1"]).ptp(axis=0).min() > 0.01  # UVs, not zeros
+    bpy.ops.wm.open_mainfile(filepath=str(saved))
+    assert set(map(tuple, lightmapped_uv_maps().values())) == {("Lightmap",)}
+
+
+def test_textures_follow_their_uv_maps_when_the_lightmap_moves_to_texcoord_1(empty_scene, tmp_path):
+    """Meshes with UV maps [A, B, Lightmap]: glTF sets [A, Lightmap, B]; a texture on B gets
+    texCoord 2; the file's UV maps stay as they were."""
+    lit_ground(empty_scene)
+    mat = bpy.data.materials.new("Textured")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.new("Checker", 4, 4)
+    uv = mat.node_tree.nodes.new("ShaderNodeUVMap")
+    uv.uv_map = "B"
+    mat.node_tree.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+    mat.node_tree.links.new(tex.outputs["Color"],
+                            mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    for ob in empty_scene.objects:
+        if ob.type == "MESH":
+            for name, value in (("A", 0.25), ("B", 0.75)):
+                ob.data.uv_layers.new(name=name).uv.foreach_set(
+                    "vector", [value] * (2 * len(ob.data.loops)))
+            ob.data.materials.append(mat)
+    tex.image.pack()
+    blend, saved, glb = tmp_path / "in.blend", tmp_path / "out.blend", tmp_path / "out.glb"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli.main(["bake", str(blend), *FAST, "--output", str(tmp_path / "maps"),
+                     "--gltf", str(glb), "--save", str(saved)]) == 0
+    doc, binary = read_glb(glb)
+    (material,) = doc["materials"]
+    assert material["pbrMetallicRoughness"]["baseColorTexture"]["texCoord"] == 2
+    assert material["extensions"]["MOZ_lightmap"]["texCoord"] == 1
+    for mesh in doc["meshes"]:
+        (prim,) = mesh["primitives"]
+        attrs = prim["attributes"]
+        assert np.allclose(accessor(doc, binary, attrs["TEXCOORD_0"]), [0.25, 0.75])  # v flipped
+        assert np.allclose(accessor(doc, binary, attrs["TEXCOORD_2"]), [0.75, 0.25])
+        assert accessor(doc, binary, attrs["TEXCOORD_1"]).ptp(axis=0).min() > 0.01
+    bpy.ops.wm.open_mainfile(filepath=str(saved))
+    assert set(map(tuple, lightmapped_uv_maps().values())) == {("A", "B", "Lightmap")}
