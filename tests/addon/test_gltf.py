@@ -232,3 +232,44 @@ def test_textures_follow_their_uv_maps_when_the_lightmap_moves_to_texcoord_1(emp
         assert accessor(doc, binary, attrs["TEXCOORD_1"]).ptp(axis=0).min() > 0.01
     bpy.ops.wm.open_mainfile(filepath=str(saved))
     assert set(map(tuple, lightmapped_uv_maps().values())) == {("A", "B", "Lightmap")}
+
+
+@pytest.mark.parametrize("name", ["cornell_box", "lamp_scene"])
+def test_file_export_with_the_addon_enabled_uses_the_panel_settings(samples, addon_enabled, name,
+                                                                    tmp_path):
+    """bpy.ops.export_scene.gltf as File › Export › glTF 2.0 runs it: the exporter finds the user
+    extension through preferences.addons; the panel's encoding and on/off switch apply."""
+    import io_scene_gltf2
+
+    assert "Radiosity Baker lightmaps" in io_scene_gltf2.exporter_extension_layout_draw
+    saved, _ = samples[name]
+    bpy.ops.wm.open_mainfile(filepath=str(saved))
+    uv_maps = lightmapped_uv_maps()
+    materials = {ob.name: [s.material.name for s in ob.material_slots]
+                 for ob in bpy.data.objects if ob.name in uv_maps}
+    assert uv_maps and all(materials.values())
+    panel = bpy.context.scene.radiosity_baker_gltf
+    panel.encoding = "hdr"
+    hdr, bare = tmp_path / "hdr.glb", tmp_path / "bare.glb"
+    bpy.ops.export_scene.gltf(filepath=str(hdr), export_format="GLB")
+    panel.enabled = False
+    bpy.ops.export_scene.gltf(filepath=str(bare), export_format="GLB")
+
+    doc, _ = read_glb(hdr)
+    nodes = {node["name"]: node for node in doc["nodes"]}
+    for ob_name in uv_maps:
+        for prim in doc["meshes"][nodes[ob_name]["mesh"]]["primitives"]:
+            assert "TEXCOORD_1" in prim["attributes"]
+            ext = doc["materials"][prim["material"]]["extensions"]["MOZ_lightmap"]
+            assert ext["texCoord"] == 1 and ext["extras"] == {"encoding": "hdr"}
+            image = doc["images"][doc["textures"][ext["index"]]["source"]]
+            assert image["mimeType"] == "image/vnd.radiance"
+    doc, _ = read_glb(bare)  # left out: no lightmap, and Blender's own UV numbering
+    assert "MOZ_lightmap" not in json.dumps(doc)
+    for ob_name, names in uv_maps.items():
+        for prim in doc["meshes"][nodes[ob_name]["mesh"]]["primitives"]:
+            assert sorted(k for k in prim["attributes"] if k.startswith("TEXCOORD_")) == \
+                [f"TEXCOORD_{i}" for i in range(len(names))]
+    assert lightmapped_uv_maps() == uv_maps  # the file's UV maps and materials as they were
+    assert {ob: [s.material.name for s in bpy.data.objects[ob].material_slots]
+            for ob in materials} == materials
