@@ -273,3 +273,22 @@ def test_file_export_with_the_addon_enabled_uses_the_panel_settings(samples, add
     assert lightmapped_uv_maps() == uv_maps  # the file's UV maps and materials as they were
     assert {ob: [s.material.name for s in bpy.data.objects[ob].material_slots]
             for ob in materials} == materials
+
+
+def test_objects_without_a_material_get_a_grey_one_with_their_lightmap_in_the_file_only(
+        empty_scene, tmp_path):
+    lit_ground(empty_scene)  # no materials: the bake took them for grey 0.8
+    blend, saved, glb = tmp_path / "in.blend", tmp_path / "out.blend", tmp_path / "out.glb"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli.main(["bake", str(blend), *FAST, "--output", str(tmp_path / "maps"),
+                     "--gltf", str(glb), "--save", str(saved)]) == 0
+    doc, _ = read_glb(glb)
+    (material,) = doc["materials"]
+    assert material["pbrMetallicRoughness"] == {"baseColorFactor": [0.8, 0.8, 0.8, 1.0],
+                                                "metallicFactor": 0.0, "roughnessFactor": 0.5}
+    assert material["extensions"]["MOZ_lightmap"]["texCoord"] == 1
+    assert len(doc["meshes"]) == 2 and all(
+        prim["material"] == 0 for mesh in doc["meshes"] for prim in mesh["primitives"])
+    bpy.ops.wm.open_mainfile(filepath=str(saved))
+    assert not bpy.data.materials and all(
+        not ob.material_slots for ob in bpy.data.objects if ob.type == "MESH")
