@@ -1,6 +1,9 @@
 """Puts ``bench/`` on the path: the Cycles harness and the error measures (``harness``) live there,
-outside the extension, and tests use them as the benchmarks do."""
+outside the extension, and tests use them as the benchmarks do; and ``examples/threejs/`` for the
+browser test's ``headless`` (the page in Chromium, shared with the README picture's script)."""
 import os
 import sys
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bench"))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "bench"))
+sys.path.insert(0, os.path.join(ROOT, "examples", "threejs"))

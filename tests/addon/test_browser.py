@@ -2,66 +2,41 @@
 the same bake: headless Chromium's screenshot against a Cycles render of albedo × the baked
 lightmap through the same camera, mean colour per object; the page without MOZ_lightmap must fail.
 
-Chromium is driven by its own command line (``--screenshot`` after ``--virtual-time-budget``:
-the page draws once, after the GLB has loaded, on a magenta page, so a page that did not finish
-fails the comparison); needs Debian's ``chromium`` and ``npm ci`` in examples/threejs (README's
+Chromium is driven by its own command line (examples/threejs/headless.py: the page draws once,
+after the GLB has loaded, on a magenta page, so a page that did not finish fails the comparison);
+needs Debian's ``chromium`` and ``npm ci`` in examples/threejs (README's
 set-up does both where it runs as root). Without them the test skips, or fails where
 RB_REQUIRE_BROWSER=1 (CI).
 """
-import functools
-import http.server
 import os
-import shutil
-import subprocess
-import threading
 from pathlib import Path
 
 import bpy
+import headless  # examples/threejs (tests/conftest.py puts it on the path)
 import numpy as np
 import pytest
 
 from radiosity_baker.addon import cli
 from radiosity_baker.core.lightmap import files
 
-ROOT = Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "examples" / "threejs"
-CORNELL = ROOT / "sample_blends" / "cornell_box.blend"
+CORNELL = Path(__file__).resolve().parents[2] / "sample_blends" / "cornell_box.blend"
 SIZE = 192
 # Largest difference of an object's mean sRGB colour (0–1) between the page and Blender.
 TOLERANCE = 0.03
 
 
-def _browser() -> str:
-    missing = []
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    if chromium is None:
-        missing.append("Debian's chromium (apt-get install chromium)")
-    if not (EXAMPLE / "node_modules" / "three").is_dir():
-        missing.append("three.js (cd examples/threejs && npm ci)")
+def _require_browser() -> None:
+    missing = headless.missing()
     if missing:
         message = "the browser test needs " + " and ".join(missing)
         if os.environ.get("RB_REQUIRE_BROWSER") == "1":
             pytest.fail(message)
         pytest.skip(message)
-    return chromium
 
 
-def screenshot(chromium: str, site: Path, tmp_path: Path, query: str) -> np.ndarray:
-    """float32[SIZE,SIZE,3] sRGB (0–1) of the page served from ``site`` on 127.0.0.1."""
-    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(site))
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    shot = tmp_path / "shot.png"
-    try:
-        subprocess.run([chromium, "--headless=new", "--no-sandbox", "--use-angle=swiftshader",
-                        "--enable-unsafe-swiftshader", f"--screenshot={shot}",
-                        f"--window-size={SIZE + 64},{SIZE + 64}", "--virtual-time-budget=20000",
-                        f"http://127.0.0.1:{server.server_address[1]}/index.html?size={SIZE}{query}"],
-                       check=True, timeout=60, capture_output=True, cwd=tmp_path)
-    finally:
-        server.shutdown()
-        server.server_close()
+def screenshot(site: Path, tmp_path: Path, query: str) -> np.ndarray:
+    """float32[SIZE,SIZE,3] sRGB (0–1) of the page served from ``site``."""
+    shot = headless.screenshot(site, tmp_path / "shot.png", SIZE, query)
     return files.read_exr(shot)[::-1][:SIZE, :SIZE, :3]  # top row first, canvas at the top left
 
 
@@ -134,17 +109,14 @@ def object_means(rgb: np.ndarray, index: np.ndarray, names: list) -> dict:
 
 
 def test_threejs_page_shows_the_cornell_lightmap_as_blender_does(empty_scene, tmp_path):
-    chromium = _browser()
-    saved, glb = tmp_path / "box.blend", tmp_path / "site" / "cornell_box.glb"
-    site = glb.parent
-    site.mkdir()
-    for name in ("index.html", "main.js", "moz_lightmap.js", "node_modules"):
-        (site / name).symlink_to(EXAMPLE / name)
+    _require_browser()
+    site = headless.make_site(tmp_path / "site")
+    saved, glb = tmp_path / "box.blend", site / "cornell_box.glb"
     assert cli.main(["bake", str(CORNELL), "--method", "bunnell", "--samples", "4", "--target",
                      "lightmap", "--texel-density", "8", "--output", str(tmp_path / "maps"),
                      "--lightmap-format", "rgbm", "--gltf", str(glb), "--save", str(saved)]) == 0
-    page = screenshot(chromium, site, tmp_path, "")
-    stripped = screenshot(chromium, site, tmp_path, "&strip=1")
+    page = screenshot(site, tmp_path, "")
+    stripped = screenshot(site, tmp_path, "&strip=1")
     reference, index, names = blender_view(saved, tmp_path)
     want = object_means(reference, index, names)
     got, control = object_means(page, index, names), object_means(stripped, index, names)
