@@ -31,7 +31,7 @@ _WHEEL_PLATFORM = {"linux-x64": ("linux", "x86_64"), "windows-x64": ("win", "amd
 # Heavy folders never worth copying into the staging tree (Blender's builder excludes the rest
 # through the manifest's paths_exclude_pattern).
 _STAGE_SKIP = (".git", ".venv", "wheels", "wheels-cache", "dist", "build", "out", "tests", "bench",
-               "sample_blends", ".pytest_cache", "__pycache__", "*.egg-info")
+               "sample_blends", "examples", ".pytest_cache", "__pycache__", "*.egg-info")
 
 
 class BuildError(RuntimeError):
