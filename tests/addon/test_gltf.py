@@ -292,3 +292,23 @@ def test_objects_without_a_material_get_a_grey_one_with_their_lightmap_in_the_fi
     bpy.ops.wm.open_mainfile(filepath=str(saved))
     assert not bpy.data.materials and all(
         not ob.material_slots for ob in bpy.data.objects if ob.type == "MESH")
+
+
+def test_a_udim_lightmap_is_left_out_with_a_warning_naming_it(empty_scene, tmp_path, capfd):
+    lit_ground(empty_scene)
+    mat = bpy.data.materials.new("Grey")
+    for ob in empty_scene.objects:
+        if ob.type == "MESH":
+            ob.data.materials.append(mat)
+    blend, glb = tmp_path / "in.blend", tmp_path / "out.glb"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    capfd.readouterr()
+    assert cli.main(["bake", str(blend), "--method", "direct", "--samples", "4", "--target",
+                     "lightmap", "--texel-density", "20", "--max-size", "128", "--atlas-pages",
+                     "many", "--output", str(tmp_path / "maps"), "--gltf", str(glb)]) == 0
+    assert sorted(p.name for p in (tmp_path / "maps").glob("*.exr")) == [
+        "Lightmap.1001.exr", "Lightmap.1002.exr"]  # the ground fills the first tile
+    out = "".join(capfd.readouterr())
+    assert "lightmap Lightmap is a UDIM tile set" in out and "--atlas-pages one" in out
+    doc, _ = read_glb(glb)
+    assert "MOZ_lightmap" not in json.dumps(doc)
