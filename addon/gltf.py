@@ -109,7 +109,7 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
             return
         renumber = {b: order.index(b) for b in range(len(names))}  # Blender index -> glTF index
         for prim in gltf2_mesh.primitives:
-            attributes = prim.attributes  # may be shared with other primitives: replaced, not edited
+            attributes = prim.attributes  # may be shared by primitives: replaced, not edited
             if not all(f"TEXCOORD_{b}" in attributes for b in range(len(names))):
                 continue  # UVs not exported (or loose edges and points)
             kept = {k: v for k, v in attributes.items()
@@ -198,7 +198,8 @@ def texcoord_order(uv_names: list[str]) -> list[int] | None:
     maps are ``uv_names`` (Blender's order): the first UV map other than ``Lightmap`` (the
     ``Lightmap`` UV map again when it is the only one), then the ``Lightmap`` UV map, then the
     other UV maps in order. None without a ``Lightmap`` UV map. E.g. ["Lightmap"] -> [0, 0];
-    ["A", "Lightmap"] -> [0, 1]; ["Lightmap", "A"] -> [1, 0]; ["A", "B", "Lightmap"] -> [0, 2, 1]."""
+    ["A", "Lightmap"] -> [0, 1]; ["Lightmap", "A"] -> [1, 0];
+    ["A", "B", "Lightmap"] -> [0, 2, 1]."""
     if UV_NAME not in uv_names:
         return None
     k = uv_names.index(UV_NAME)
@@ -288,8 +289,8 @@ def _lightmaps_of(material) -> list:
     material = material.original
     found = []
     for ob in bpy.data.objects:
-        if ob.type != "MESH" or not any(
-                s.material is not None and s.material.original == material for s in ob.material_slots):
+        if ob.type != "MESH" or not any(s.material is not None and s.material.original == material
+                                        for s in ob.material_slots):
             continue
         image = _page_image(ob)
         if image is not None:

@@ -45,6 +45,7 @@ def screenshot(site: Path, out: Path, size: int, query: str = "", budget_ms: int
     screenshot of ``index.html?size=<size><query>`` served from ``site`` on 127.0.0.1, after
     ``budget_ms`` of the page's virtual time."""
     handler = functools.partial(_QuietHandler, directory=str(site))
+    url = "http://127.0.0.1:{}/index.html?size={}{}"
     server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
@@ -53,7 +54,7 @@ def screenshot(site: Path, out: Path, size: int, query: str = "", budget_ms: int
                         "--enable-unsafe-swiftshader", f"--screenshot={out.resolve()}",
                         f"--window-size={size + 64},{size + 64}",
                         f"--virtual-time-budget={budget_ms}",
-                        f"http://127.0.0.1:{server.server_address[1]}/index.html?size={size}{query}"],
+                        url.format(server.server_address[1], size, query)],
                        check=True, timeout=60, capture_output=True, cwd=out.parent)
     finally:
         server.shutdown()

@@ -86,7 +86,8 @@ def samples(tmp_path_factory):
 @pytest.fixture
 def addon_enabled():
     """The package enabled by Blender's add-on manager (``addon_utils``, an entry in
-    ``preferences.addons``) as File › Export finds it in Blender, instead of conftest's register."""
+    ``preferences.addons``) as File › Export finds it in Blender, in place of conftest's
+    register."""
     radiosity_baker.unregister()
     try:
         addon_utils.enable("radiosity_baker", default_set=True, handle_error=_raise)
@@ -237,8 +238,8 @@ def test_textures_follow_their_uv_maps_when_the_lightmap_moves_to_texcoord_1(emp
 @pytest.mark.parametrize("name", ["cornell_box", "lamp_scene"])
 def test_file_export_with_the_addon_enabled_uses_the_panel_settings(samples, addon_enabled, name,
                                                                     tmp_path):
-    """bpy.ops.export_scene.gltf as File › Export › glTF 2.0 runs it: the exporter finds the user
-    extension through preferences.addons; the panel's encoding and on/off switch apply."""
+    """bpy.ops.export_scene.gltf as File › Export › glTF 2.0 runs it: the exporter finds the
+    user extension through preferences.addons; the panel's encoding and on/off switch apply."""
     import io_scene_gltf2
 
     assert "Radiosity Baker lightmaps" in io_scene_gltf2.exporter_extension_layout_draw
