@@ -38,9 +38,11 @@ def _build_linux_zip(output: Path) -> Path:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="builds the linux-x64 package")
 def test_installed_extension_bakes(tmp_path):
     zip_path = _build_linux_zip(tmp_path / "dist")
-    # only what runs in Blender: no tests, benchmarks or the Cycles harness
-    sources = {n for n in zipfile.ZipFile(zip_path).namelist() if n.endswith(".py")}
+    # only what runs in Blender: no tests, benchmarks, the Cycles harness or the engine examples
+    names = zipfile.ZipFile(zip_path).namelist()
+    sources = {n for n in names if n.endswith(".py")}
     assert "core/pipeline.py" in sources and "addon/writers.py" in sources
+    assert not [n for n in names if n.startswith("examples/")]  # three.js: 24 MB after npm ci
     assert not [n for n in sources if n.split("/")[0] in ("tests", "bench")
                 or Path(n).stem in ("cycles_ref", "compare", "metrics", "cycles", "harness")]
     user = tmp_path / "blender_user"
