@@ -58,7 +58,10 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col.active = "lightmap" in TARGET_OUTPUTS[s.target]
         for name in ("texel_density", "max_size", "atlas_pages", "padding", "layout", "output",
                      "hookup", "reunwrap", "supersample", "texel_indirect", "texel_links", "texel_shadows",
-                     "shadow_budget", "lightmap_format", "pack_images"):
+                     "shadow_budget", "lightmap_format", "directional", "pack_images"):
+            _prop(col, s, name)
+        col = layout.column(heading="Light Probes")
+        for name in ("probes", "probe_spacing"):
             _prop(col, s, name)
         ob = context.object
         if ob is not None and ob.type == 'MESH':
