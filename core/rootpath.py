@@ -31,7 +31,7 @@ def path_up(t: Nodes, x: int, limit: float) -> int:
     """The node after x on its root path: x's parent; −1 at the root or where the parent has more
     than ``limit`` leaves."""
     p = t.parent[x]
-    if p >= 0 and t.leaves[p] > limit:
+    if limit < WHOLE and p >= 0 and t.leaves[p] > limit:  # (an uncut path compiles to parent alone)
         return -1
     return p
 
