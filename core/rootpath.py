@@ -10,10 +10,10 @@ than ``limit`` leaves (``WHOLE``: never cut). The walk over its nodes:
 
 and over their links (``links.LinkSet``) in root-path order, the node's own first:
 
-    c = path_link_begin(t, ls, k, limit)
-    while c.node >= 0:
-        ...                                  # link c.link, received by node c.node
-        c = path_link_next(t, ls, c)
+    walk = path_link_begin(t, ls, k, limit)
+    while walk.node >= 0:
+        ...                                  # link walk.link, received by node walk.node
+        walk = path_link_next(t, ls, walk)
 """
 import warp as wp
 
