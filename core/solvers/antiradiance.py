@@ -58,6 +58,7 @@ from .. import links as links_mod
 from ..directions import Masks
 from ..hierarchy import Nodes
 from ..links import LinkSet
+from ..rootpath import WHOLE, path_up
 from . import base
 from .base import Solution, iterate, reconstruct_with_detail
 from .implicit import bins_of, links_of, path_gather, path_weights
@@ -161,7 +162,7 @@ def _through_kernel(offset: int, t: Nodes, row: wp.array(dtype=wp.int32), size: 
             b = row[x] * bins + directions.bin_of(directions.frame_dir(t.normal[x], arrival), size)
             acc += incoming[b]
             covered += coverage[b]
-        x = t.parent[x]
+        x = path_up(t, x, WHOLE)
     table[i] = -acc / wp.max(covered, 1.0)
 
 

@@ -35,6 +35,7 @@ from .. import links as links_mod
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet, Sampling, leaf_point, sample_leaf, sided_ff
 from ..rays import lift, visible
+from ..rootpath import WHOLE, path_link_begin, path_link_next, path_top, path_up
 from ..surfels import Surfels, fan_sample, point_ff
 from .base import Solution, exitance, iterate, reconstruct_with_detail
 
@@ -95,7 +96,7 @@ def _push_kernel(offset: int, t: Nodes, gathered: wp.array(dtype=wp.vec3), out: 
     x = k
     while x >= 0:
         acc += gathered[x]
-        x = t.parent[x]
+        x = path_up(t, x, WHOLE)
     out[t.element[k]] = acc
 
 
@@ -123,10 +124,10 @@ def _above_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.a
     if t.leaves[y] <= limit and x >= 0 and t.leaves[x] > limit:
         p = t.position[y]
         n = t.normal[y]
-        while x >= 0:
-            for j in range(ls.offsets[x], ls.offsets[x + 1]):
-                acc += radiance[ls.sender[j]] * transfer_at(t, s, ls, j, p, n, 1, 1)
-            x = t.parent[x]
+        walk = path_link_begin(t, ls, x, WHOLE)
+        while walk.node >= 0:
+            acc += radiance[ls.sender[walk.link]] * transfer_at(t, s, ls, walk.link, p, n, 1, 1)
+            walk = path_link_next(t, ls, walk)
     above[y] = acc
 
 
@@ -138,16 +139,12 @@ def path_gather(t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.array(dtype=wp.v
     are), those of larger nodes as they bring it to the highest such node (``above``)."""
     acc = wp.vec3(0.0)
     count = int(0)
-    x = k
-    last = k
-    while x >= 0 and t.leaves[x] <= limit:
-        for j in range(ls.offsets[x], ls.offsets[x + 1]):
-            acc += radiance[ls.sender[j]] * transfer_at(t, s, ls, j, p, n, int(x != k), 1)
-        count += ls.offsets[x + 1] - ls.offsets[x]
-        last = x
-        x = t.parent[x]
-    if x >= 0:
-        acc += above[last]
+    walk = path_link_begin(t, ls, k, limit)
+    while walk.node >= 0:
+        acc += radiance[ls.sender[walk.link]] * transfer_at(t, s, ls, walk.link, p, n, int(walk.node != k), 1)
+        count += 1
+        walk = path_link_next(t, ls, walk)
+    acc += above[path_top(t, k, limit)]  # 0 at the root
     return acc, count
 
 
@@ -244,10 +241,10 @@ def on_path(t: Nodes, leaf: int, x: int) -> int:
     """1 when node x lies on the path from ``leaf`` to the root, else 0."""
     y = leaf
     size = t.leaves[x]
-    while y >= 0 and t.leaves[y] <= size:
+    while y >= 0:
         if y == x:
             return 1
-        y = t.parent[y]
+        y = path_up(t, y, size)
     return 0
 
 
@@ -279,8 +276,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
             continue
         k = leaf_of[corners[i, c]]
         x = k
-        last = k
-        while x >= 0 and t.leaves[x] <= limit:
+        while x >= 0:
             shared = w
             for c2 in range(corners.shape[1]):
                 w2 = weights[i, c2]
@@ -290,10 +286,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                             shared = 0.0  # done with the earlier corner
                         else:
                             shared += w2
-            if shared <= 0.0:  # an earlier corner's path from here up: only its top is wanted
-                while x >= 0 and t.leaves[x] <= limit:
-                    last = x
-                    x = t.parent[x]
+            if shared <= 0.0:  # an earlier corner's path from here up
                 break
             for j in range(ls.offsets[x], ls.offsets[x + 1]):
                 b = ls.sender[j]
@@ -316,10 +309,8 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                         f *= h / float(rays) * 255.0 / float(seen)  # the texel's visible fraction for the link's
                         count += rays
                 acc += glow * (shared * f)
-            last = x
-            x = t.parent[x]
-        if x >= 0:
-            acc += above[last] * w
+            x = path_up(t, x, limit)
+        acc += above[path_top(t, k, limit)] * w  # 0 at the root
     out[i] = acc
     traced[i] = count  # per texel: Warp's CPU atomics are not atomic across our threads
 

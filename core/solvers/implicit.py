@@ -44,6 +44,7 @@ from .. import links as links_mod
 from ..errors import BakeError
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet
+from ..rootpath import WHOLE, path_link_begin, path_link_next, path_up
 from ..surfels import Surfels
 from . import base
 from .base import Solution, iterate, reconstruct_with_detail
@@ -101,7 +102,7 @@ def _path_count_kernel(offset: int, t: Nodes, ls: LinkSet, counts: wp.array(dtyp
     x = k
     while x >= 0:
         c += ls.offsets[x + 1] - ls.offsets[x]
-        x = t.parent[x]
+        x = path_up(t, x, WHOLE)
     counts[k] = c
 
 
@@ -145,51 +146,51 @@ def _path_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, sides: int, nea
         for b in range(bins):
             scratch[row + b] = wp.vec3(1.0e30, 0.0, 0.0)
         for step in range(2):  # the nearest per bin, then the transfer of its layer and behind it
-            x = k
-            while x >= 0:
-                for j in range(ls.offsets[x], ls.offsets[x + 1]):
-                    f = transfer_at(t, s, ls, j, p, n, 1, 2)
-                    u, dist, omega = _cone_of(t, ls.sender[j], p)
-                    count = directions.cone_count(omega, bin_omega)
-                    seen = _front_samples(count, n, u, omega, size)
-                    if f > 0.0 and seen > 0:
-                        part = f / float(seen)
-                        for c in range(count):
-                            b = directions.cone_bin(c, count, n, u, omega, size, 0.0)
-                            v = scratch[row + b]
-                            if step == 0:
-                                v = wp.vec3(wp.min(v[0], dist), 0.0, 0.0)
-                            elif dist <= v[0] * LAYER:
-                                v = wp.vec3(v[0], v[1] + part, v[2])
-                            else:
-                                v = wp.vec3(v[0], v[1], v[2] + part)
-                            scratch[row + b] = v
-                x = t.parent[x]
-    i = out.offsets[k]
-    x = k
-    while x >= 0:
-        for j in range(ls.offsets[x], ls.offsets[x + 1]):
-            # a leaf's own links hold their transfer at it, from both faces: kept as they are for
-            # both faces, scaled to the front otherwise
-            f = transfer_at(t, s, ls, j, p, n, int(x != k or sides == 1), sides)
-            if nearest_on != 0 and f > 0.0:
+            walk = path_link_begin(t, ls, k, WHOLE)
+            while walk.node >= 0:
+                j = walk.link
+                f = transfer_at(t, s, ls, j, p, n, 1, 2)
                 u, dist, omega = _cone_of(t, ls.sender[j], p)
                 count = directions.cone_count(omega, bin_omega)
                 seen = _front_samples(count, n, u, omega, size)
-                won = float(0.0)
-                for c in range(count):
-                    b = directions.cone_bin(c, count, n, u, omega, size, 0.0)
-                    v = scratch[row + b]
-                    if directions.front(b, size):
-                        if dist <= v[0] * LAYER:
-                            won += 1.0
-                        elif v[2] > 0.0:  # behind the nearest layer: what the layer leaves of the bin
-                            won += wp.min(v[2], wp.max(capacity[b] - v[1], 0.0)) / v[2]
-                if seen > 0:
-                    f *= won / float(seen)
-            out.weight[i] = wp.max(f, 0.0)
-            i += 1
-        x = t.parent[x]
+                if f > 0.0 and seen > 0:
+                    part = f / float(seen)
+                    for c in range(count):
+                        b = directions.cone_bin(c, count, n, u, omega, size, 0.0)
+                        v = scratch[row + b]
+                        if step == 0:
+                            v = wp.vec3(wp.min(v[0], dist), 0.0, 0.0)
+                        elif dist <= v[0] * LAYER:
+                            v = wp.vec3(v[0], v[1] + part, v[2])
+                        else:
+                            v = wp.vec3(v[0], v[1], v[2] + part)
+                        scratch[row + b] = v
+                walk = path_link_next(t, ls, walk)
+    i = out.offsets[k]
+    walk = path_link_begin(t, ls, k, WHOLE)
+    while walk.node >= 0:
+        j = walk.link
+        # a leaf's own links hold their transfer at it, from both faces: kept as they are for
+        # both faces, scaled to the front otherwise
+        f = transfer_at(t, s, ls, j, p, n, int(walk.node != k or sides == 1), sides)
+        if nearest_on != 0 and f > 0.0:
+            u, dist, omega = _cone_of(t, ls.sender[j], p)
+            count = directions.cone_count(omega, bin_omega)
+            seen = _front_samples(count, n, u, omega, size)
+            won = float(0.0)
+            for c in range(count):
+                b = directions.cone_bin(c, count, n, u, omega, size, 0.0)
+                v = scratch[row + b]
+                if directions.front(b, size):
+                    if dist <= v[0] * LAYER:
+                        won += 1.0
+                    elif v[2] > 0.0:  # behind the nearest layer: what the layer leaves of the bin
+                        won += wp.min(v[2], wp.max(capacity[b] - v[1], 0.0)) / v[2]
+            if seen > 0:
+                f *= won / float(seen)
+        out.weight[i] = wp.max(f, 0.0)
+        i += 1
+        walk = path_link_next(t, ls, walk)
 
 
 def path_weights(problem, links, sides: int, bins: int = 0) -> Paths:
@@ -237,12 +238,11 @@ def _path_gather_kernel(offset: int, t: Nodes, ls: LinkSet, paths: Paths, sent: 
     k = wp.tid() + offset
     acc = wp.vec3(0.0)
     i = paths.offsets[k]
-    x = k
-    while x >= 0:
-        for j in range(ls.offsets[x], ls.offsets[x + 1]):
-            acc += sent[j] * paths.weight[i]
-            i += 1
-        x = t.parent[x]
+    walk = path_link_begin(t, ls, k, WHOLE)
+    while walk.node >= 0:
+        acc += sent[walk.link] * paths.weight[i]
+        i += 1
+        walk = path_link_next(t, ls, walk)
     out[t.element[k]] = acc
 
 
