@@ -120,8 +120,9 @@ def _ray_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
                                      + corner_normals[f + 2] * wc)
 
 
-def grid_points(lo: np.ndarray, hi: np.ndarray, spacing: float) -> tuple:
-    """(float32[P,3] cell centres of the box lo…hi cut into cells at most ``spacing`` (m) wide,
+def grid_points(lo: np.ndarray, hi: np.ndarray, spacing) -> tuple:
+    """(float32[P,3] cell centres of the box lo…hi cut into cells at most ``spacing`` (m; float,
+    or float[3] per axis) wide,
     x fastest; (nx, ny, nz); float32[3] the cells' sizes)."""
     extent = np.maximum(np.asarray(hi, np.float64) - lo, 0.0)
     counts = np.maximum(np.ceil(extent / spacing - 1e-9), 1).astype(int)
@@ -134,10 +135,10 @@ def grid_points(lo: np.ndarray, hi: np.ndarray, spacing: float) -> tuple:
 
 class Target:
     """Light probes on a grid over ``box`` ((lo, hi) float[3] each, m, world; None: the scene's
-    bounds), cells at most ``spacing`` m (None: ``settings.probe_spacing``); its result is a
-    ``ProbeGrid``."""
+    bounds), cells at most ``spacing`` m (float or float[3] per axis; None:
+    ``settings.probe_spacing``); its result is a ``ProbeGrid``."""
 
-    def __init__(self, box: Optional[tuple] = None, spacing: Optional[float] = None):
+    def __init__(self, box: Optional[tuple] = None, spacing=None):
         self.box = box
         self.spacing = spacing
 
@@ -152,7 +153,7 @@ class Target:
             lo, hi = scene.positions.min(axis=0), scene.positions.max(axis=0)
         else:
             lo, hi = (np.asarray(b, np.float64) - origin for b in self.box)
-        spacing = self.spacing or problem.settings.probe_spacing
+        spacing = self.spacing if self.spacing is not None else problem.settings.probe_spacing
         points, shape, cell = grid_points(np.asarray(lo, np.float64), np.asarray(hi, np.float64),
                                           spacing)
         sh, back = problem.stages.run("probes", self._gather, problem, points, light)
