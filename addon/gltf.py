@@ -32,8 +32,8 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, PointerProperty
 
 from ..core.lightmap import encodings
-from .lightmap import UV_NAME
-from .tags import IMAGE_TAG, NODE_IMAGE, NODE_UV, OBJECT_TAG
+from .lightmap import DIRECTIONAL_SUFFIX, UV_NAME
+from .tags import DIRECTIONAL_TAG, IMAGE_TAG, NODE_IMAGE, NODE_UV, OBJECT_TAG
 
 EXTENSION = "MOZ_lightmap"
 ENCODINGS = ("rgbm", "rgbd", "hdr", "half", "float")
@@ -185,12 +185,29 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
         """(glTF texture, extras) of Blender ``image``, encoded once per export."""
         if image.name not in self._textures:
             data, suffix, extras = encode_image(image, self.encoding)
-            source = self._io.Image(buffer_view=self._binary(data=data), extensions=None,
-                                    extras=None, mime_type=MIME[suffix], name=image.name, uri=None)
-            texture = self._io.Texture(extensions=None, extras=None, name=image.name,
-                                       sampler=None, source=source)
-            self._textures[image.name] = (texture, extras)
+            texture = self._embedded(data, suffix, image.name)
+            self._textures[image.name] = (texture, {**extras, **self._directional(image)})
         return self._textures[image.name]
+
+    def _embedded(self, data: bytes, suffix: str, name: str):
+        """A glTF texture holding the image file ``data`` (of type ``suffix``) in the binary."""
+        source = self._io.Image(buffer_view=self._binary(data=data), extensions=None, extras=None,
+                                mime_type=MIME[suffix], name=name, uri=None)
+        return self._io.Texture(extensions=None, extras=None, name=name, sampler=None, source=source)
+
+    def _directional(self, image) -> dict:
+        """{"directional": {"layout", "texture"}} for a page baked with ``--directional``: the file
+        beside it (``<page>.sh.exr``, ``.godot.exr`` or ``.dir.png``, README "Directional
+        lightmaps") as one more texture, whose index the export writes there; else {}."""
+        layout = image.get(DIRECTIONAL_TAG, "none")
+        if layout not in DIRECTIONAL_SUFFIX:
+            return {}
+        page = Path(bpy.path.abspath(image.filepath))
+        path = page.with_name(page.name.rsplit(".", 1)[0] + DIRECTIONAL_SUFFIX[layout])
+        if not path.is_file():
+            return {}
+        texture = self._embedded(path.read_bytes(), path.suffix, path.name)
+        return {"directional": {"layout": layout, "texture": texture}}
 
 
 def texcoord_order(uv_names: list[str]) -> list[int] | None:

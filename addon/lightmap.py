@@ -21,10 +21,11 @@ from pathlib import Path
 import bpy
 import numpy as np
 
+from ..core import directional
 from ..core.lightmap import ATLAS_NAME, LightmapObject, LightmapRequest, budget, encodings, files
 from .extract import ExtractionError
 from .outputs import OutputError, Staging, check_folder, same_file
-from .tags import IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, OBJECT_TAG, UV_TAG
+from .tags import DIRECTIONAL_TAG, IMAGE_TAG, NODE_IMAGE, NODE_MULTIPLY, NODE_PREFIX, NODE_UV, OBJECT_TAG, UV_TAG
 from .write import name_clash
 
 UV_NAME = "Lightmap"
@@ -174,16 +175,34 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
             with staging.writing(paths[page.stem]) as temp:
                 encodings.write(temp, page.rgb, "half" if fmt in encodings.EIGHT_BIT else fmt)
                 files.verify(temp, page.size)
-            if page.l1 is not None:  # a directional bake: its L0 and L1 beside the page
-                with staging.writing(folder / f"{stem}.sh.exr") as temp:
-                    files.write_directional_exr(temp, page.rgb, page.l1, settings.lightmap_format)
-                    files.verify(temp, page.size)
+            if page.l1 is not None:  # a directional bake: its layout beside the page
+                layout = settings.directional
+                with staging.writing(folder / f"{stem}{DIRECTIONAL_SUFFIX[layout]}") as temp:
+                    _write_directional(temp, page, layout, settings.lightmap_format)
+                    files.verify(temp, (page.size[0], page.size[1] * (4 if layout == "godot" else 1)))
             with staging.writing(folder / f"{stem}.png") as temp:
                 files.write_preview(temp, page.rgb)
                 files.verify(temp, page.size)
         if own:
             staging.commit()
     return paths
+
+
+# The file beside a page that holds its directional layout (``--directional``; README,
+# "Directional lightmaps and light probes").
+DIRECTIONAL_SUFFIX = {"sh": ".sh.exr", "godot": ".godot.exr", "unity": ".dir.png"}
+
+
+def _write_directional(path, page, layout: str, fmt: str) -> None:
+    """The directional file of ``page`` (L0 ``rgb``, L1 ``l1``) in ``layout``: sh its L0 and L1
+    channels; godot Godot's four layers; unity Unity's direction map (the page is its colour)."""
+    precision = fmt if fmt in ("half", "float") else "half"
+    if layout == "sh":
+        files.write_directional_exr(path, page.rgb, page.l1, precision)
+    elif layout == "godot":
+        files.write_layers_exr(path, directional.godot_layers(page.rgb, page.l1), precision)
+    else:
+        files.write_png8(path, directional.unity_direction(page.rgb, page.l1))
 
 
 @dataclass
@@ -211,6 +230,8 @@ class LightmapWrites:
             if page.name not in images:
                 images[page.name] = _load_image(page.name, paths[page.stem], pack, page.tile is not None,
                                                 frames is not None)
+        for image in images.values():  # the directional file beside it (the glTF export reads it)
+            image[DIRECTIONAL_TAG] = settings.directional
         for mat, page in self.hookups:
             warnings += _hook_up(mat, images[page], settings.hookup == "multiply", frames)
         for page in result.pages:  # which image each object is on (what the glTF export reads)

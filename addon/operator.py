@@ -8,7 +8,7 @@ import bpy
 from bpy.props import BoolProperty
 
 from ..core import BakeCancelled
-from . import animation, lightmap
+from . import animation, lightmap, probes
 from .job import USER_ERRORS, BakeJob
 
 # The running modal bake's progress, read by the status bar draw function: (stage, fraction).
@@ -153,7 +153,7 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
 
 
 class OBJECT_OT_radiosity_bake_clear(bpy.types.Operator):
-    """Remove the lightmap UV maps, images and material nodes radiosity bakes added"""
+    """Remove the lightmap UV maps, images, material nodes and probe display radiosity bakes added"""
 
     bl_idname = "object.radiosity_bake_clear"
     bl_label = "Clear Radiosity Lightmaps"
@@ -166,7 +166,7 @@ class OBJECT_OT_radiosity_bake_clear(bpy.types.Operator):
     def execute(self, context):
         objects = [ob for ob in context.selected_objects] if self.use_selected else []
         objects = objects or list(context.scene.objects)
-        removed = lightmap.clear(objects) + animation.clear(objects)
+        removed = lightmap.clear(objects) + animation.clear(objects) + probes.clear(objects)
         self.report({'INFO'}, f"Radiosity bake: {removed} items removed")
         return {'FINISHED'}
 

@@ -58,11 +58,16 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col.active = "lightmap" in TARGET_OUTPUTS[s.target]
         for name in ("texel_density", "max_size", "atlas_pages", "padding", "layout", "output",
                      "hookup", "reunwrap", "supersample", "texel_indirect", "texel_links", "texel_shadows",
-                     "shadow_budget", "lightmap_format", "directional", "pack_images"):
+                     "shadow_budget", "lightmap_format", "pack_images", "directional"):
             _prop(col, s, name)
-        col = layout.column(heading="Light Probes")
-        for name in ("probes", "probe_spacing"):
-            _prop(col, s, name)
+        col = layout.column(heading="Probes")
+        col.prop(s, "probes")
+        row = col.row()
+        row.active = s.probes != "none"
+        row.prop(s, "probe_spacing")
+        if s.probes != "none" and any(o.type == 'LIGHT_PROBE' and o.data.type == 'VOLUME'
+                                      for o in context.scene.objects):
+            col.label(text="Grid: the Light Probe Volume's box", icon='LIGHTPROBE_VOLUME')
         ob = context.object
         if ob is not None and ob.type == 'MESH':
             col.prop(ob, "radiosity_baker_texel_density", text=f"{ob.name} Density")

@@ -10,3 +10,7 @@ NODE_PREFIX = "RB Lightmap"
 NODE_UV, NODE_IMAGE, NODE_MULTIPLY = (f"{NODE_PREFIX} UV", f"{NODE_PREFIX}", f"{NODE_PREFIX} Multiply")
 # Object custom property naming the lightmap image (page) a bake put the object on.
 OBJECT_TAG = "radiosity_baker_page"
+# Image custom property on a lightmap image: the ``--directional`` layout of the file beside it.
+DIRECTIONAL_TAG = "radiosity_baker_directional"
+# Object, mesh and material custom property on the probes' viewport display (``addon.probes``).
+PROBES_TAG = "radiosity_baker_probes"

@@ -21,7 +21,7 @@ it before submitting them.
 from __future__ import annotations
 
 from ..core import targets
-from . import animation, lightmap, write
+from . import animation, lightmap, probes, write
 from .outputs import Staging
 
 
@@ -148,20 +148,24 @@ class LightmapWriter:
 class ProbesWriter:
     """The ``probes`` target into ``Probes.json`` in the output folder: per probe its position (m,
     world), validity and the SH of the arriving radiance (``core.sh``'s convention: nine RGB
-    coefficients, L1 = the first four)."""
+    coefficients, L1 = the first four); then shown in the viewport (``addon.probes``). The grid
+    covers the scene's first Light Probe Volume (its box and resolution) where there is one."""
 
     def __init__(self, job):
         self.job = job
         self.files: dict = {}
+        self._volume = (None, None)
 
     def begin(self, context) -> None:
         pass
 
     def check(self, context) -> None:
         lightmap.output_folder(self.job.settings)  # an unwritable folder fails before baking
+        self._volume = probes.volume_box(context.scene)
 
     def target(self):
-        return targets.make("probes")
+        box, spacing = self._volume
+        return targets.make("probes", box=box, spacing=spacing)
 
     def baked(self, result) -> None:
         pass
@@ -182,7 +186,7 @@ class ProbesWriter:
                 temp.write_text(json.dumps(document))
             staging.commit()
         self.files = {"Probes": path}
-        return lambda: []
+        return lambda: probes.show(context, grid)
 
     def discard(self) -> None:
         pass

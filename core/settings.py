@@ -47,7 +47,7 @@ TEXEL_SHADOWS = ("adaptive", "fixed")
 # Directional bins per element over the sphere (core/directions.py), as the panel's enum holds them.
 DIRECTIONAL_BINS = ("64", "256", "1024")
 DEVICES = ("auto", "cpu", "cuda")
-DIRECTIONAL = ("none", "sh")
+DIRECTIONAL = ("none", "sh", "godot", "unity")
 PROBES = ("none", "grid")
 LIGHT_SELECTIONS = ("auto", "exact", "tree")
 GROUPS = ("solver", "lightmap", "output")
@@ -222,15 +222,18 @@ class Settings:
     pack_images: bool = _option(False, "Pack Images", "pack the lightmap images into the .blend "
                                 "file", "lightmap")
     directional: str = _option("none", "Directional", "where each lightmap texel's light comes "
-                               "from: sh adds its L1 spherical harmonics (L0 = the plain lightmap, "
-                               "L1 along x, y, z per colour channel) to the page's EXR, for "
-                               "normal maps; none: the plain lightmap alone", "lightmap",
+                               "from, for normal maps: sh writes its L1 spherical harmonics (L0 = "
+                               "the plain lightmap, L1 along x, y, z per colour channel) as "
+                               "<page>.sh.exr; godot: Godot 4's four L1 layers stacked in "
+                               "<page>.godot.exr; unity: Unity's direction map <page>.dir.png "
+                               "beside the plain page (its colour map); none: the plain lightmap "
+                               "alone (README: Directional lightmaps)", "lightmap",
                                choices=DIRECTIONAL)
     probes: str = _option("none", "Light Probes", "light probes for objects that move through the "
                           "baked scene: grid bakes the L2 spherical harmonics of the light arriving "
                           "at points on a grid over the scene (or over a Light Probe Volume's "
-                          "box) into Probes.exr and Probes.json in the output folder; none: no "
-                          "probes", "output", choices=PROBES)
+                          "box and resolution) into Probes.json in the output folder, shown as "
+                          "the object 'RB Probes'; none: no probes", "output", choices=PROBES)
     probe_spacing: float = _option(1.0, "Probe Spacing", "distance between light probes of the grid "
                                    "(m)", "output", low=0.01, soft_high=10.0, length=True)
 

@@ -64,6 +64,25 @@ def write_directional_exr(path: Path, rgb: np.ndarray, l1: np.ndarray, precision
     _write(oiio, path, spec, np.ascontiguousarray(np.flipud(pixels), np.float32))
 
 
+def write_layers_exr(path: Path, layers: np.ndarray, precision: str = "half") -> None:
+    """Write float32[K,H,W,3] layers (row 0 bottom) as one RGB OpenEXR K·H texels tall, layer 0
+    at the top (an engine imports it as a texture array of K vertical slices)."""
+    oiio = _oiio()
+    k, h, w = layers.shape[:3]
+    spec = oiio.ImageSpec(w, k * h, 3, oiio.HALF if exr_precision(layers, precision) == "half" else oiio.FLOAT)
+    spec.attribute("compression", "zip")
+    _write(oiio, path, spec, np.ascontiguousarray(np.concatenate([np.flipud(x) for x in layers]), np.float32))
+
+
+def write_png8(path: Path, values: np.ndarray) -> None:
+    """Write float32[H,W,C] values in [0, 1] (row 0 bottom) as a linear 8-bit PNG (no sRGB
+    curve: the bytes are round(value · 255))."""
+    oiio = _oiio()
+    h, w, c = values.shape
+    px = np.rint(np.clip(np.flipud(values), 0.0, 1.0) * 255.0).astype(np.uint8)
+    _write(oiio, path, oiio.ImageSpec(w, h, c, oiio.UINT8), np.ascontiguousarray(px))
+
+
 def write_preview(path: Path, rgb: np.ndarray) -> None:
     """A PNG of float32[H,W,3]: exposure scaled so the 99th percentile maps to 1, Reinhard-style
     roll-off above, sRGB encoded, 8 bits."""

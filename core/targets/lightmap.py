@@ -75,10 +75,10 @@ class Target:
                                   whole=int(sum(self.counts)))
 
     def finish(self, problem, receivers: PageReceivers, light: receivers_mod.Light) -> LightmapResult:
-        """The pages; with ``directional`` sh each page also holds its texels' L1
-        (``core.directional``)."""
+        """The pages; with ``directional`` (sh, godot, unity) each page also holds its texels' L1
+        (``core.directional``; the writer lays it out)."""
         values = light.output
-        if problem.settings.directional == "sh":
+        if problem.settings.directional != "none":
             l1 = directional.texel_l1(problem, receivers, light)
             values = np.concatenate([values, l1.transpose(0, 2, 1).reshape(len(values), 9)], axis=1)
         result = pages.assemble(receivers.layout, receivers.grids, values, problem, self.only)

@@ -9,14 +9,18 @@ probe, over the whole sphere:
 - direct light from every lamp and emissive triangle (``direct.leaf_seen``: its light as a
   receiver facing it sees it, shadowed by ``light_samples`` rays), from its direction;
 - indirect light along RAYS stratified directions (a spherical Fibonacci set, turned at random per
-  probe): the radiance of the surface hit, ρ × the solved lighting interpolated over its triangle.
+  probe): the radiance of the surface each ray hits, ρ × its lighting there — the direct part
+  traced at the hit point itself (``direct.estimate``, HIT_SAMPLES shadow rays), the indirect part
+  the solved indirect lighting interpolated over the triangle. (Interpolating the direct part
+  too would let a vertex lit where the probe cannot look — a ceiling vertex in the gap above a
+  light fixture — brighten the visible rest of its triangles: in the sample Cornell box that made
+  the probe's light from the ceiling nearly 80 % too bright.)
 
 A probe whose rays hit more than INSIDE of back faces is inside geometry: flagged invalid. The SH
 convention is ``core.sh``'s (radiance, L2, nine coefficients per channel; L1 = the first four).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Optional
 
@@ -25,16 +29,20 @@ import warp as wp
 
 from .. import device as device_mod
 from .. import receivers as receivers_mod
-from ..direct import Emitters, leaf_seen, leaf_direction
-from ..sh import lighting_from_sh, sh9
+from ..direct import MODE_FULL, Emitters, estimate, leaf_direction, leaf_seen
+from ..directions import cone_sample_of
+from ..sh import lighting_from_sh, sh9, sh9_numpy
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
-# Indirect-light rays per probe, and the share of back faces among their hits above which a probe
-# counts as inside geometry.
+# Indirect-light rays per probe, the share of back faces among their hits above which a probe
+# counts as inside geometry, the shadow rays of the direct light at each hit (the probe averages
+# RAYS of them), and the most rays traced at once (memory: about 100 bytes a ray).
 RAYS = 4096
 INSIDE = 0.25
-GOLDEN = math.pi * (3.0 - math.sqrt(5.0))
+HIT_SAMPLES = 1
+BATCH_RAYS = 1 << 20
+MISS, BACK = -1, -2
 sh9_rgb = wp.types.matrix(shape=(9, 3), dtype=wp.float32)
 
 
@@ -57,13 +65,10 @@ class ProbeGrid:
 
 
 @wp.kernel
-def _probe_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(dtype=wp.vec3),
-                  positions: wp.array(dtype=wp.vec3), tris: wp.array(dtype=wp.vec3i),
-                  radiance: wp.array(dtype=wp.vec3), rays: int, samples: int, seed: int,
-                  far: float, out: wp.array2d(dtype=wp.vec3), back: wp.array(dtype=wp.float32)):
-    """Per probe: out[i, k] the k-th SH coefficient (RGB) of the radiance arriving at points[i],
-    back[i] the share of its rays that hit a back face. radiance: per scene triangle corner
-    (vec3[3T]), what the surface sends there."""
+def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(dtype=wp.vec3),
+                   samples: int, seed: int, far: float, out: wp.array2d(dtype=wp.vec3)):
+    """Per probe: out[i, k] the k-th SH coefficient (RGB) of the direct light arriving at
+    points[i] from the lamps and emissive triangles."""
     i = wp.tid() + offset
     p = points[i]
     acc = sh9_rgb()
@@ -71,40 +76,53 @@ def _probe_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(dt
         light = leaf_seen(g, mesh, leaf, p, seed + i, samples, far)
         if light[0] + light[1] + light[2] > 0.0:
             acc += wp.outer(sh9(leaf_direction(g, leaf, p)), light * 3.141592653589793)
-    state = wp.rand_init(seed, i)
-    turn = wp.randf(state) * 6.283185307179586
-    backs = float(0.0)
-    weight = 4.0 * 3.141592653589793 / float(rays)
-    for k in range(rays):
-        z = 1.0 - (2.0 * float(k) + 1.0) / float(rays)
-        r = wp.sqrt(wp.max(1.0 - z * z, 0.0))
-        phi = float(k) * GOLDEN + turn
-        w = wp.vec3(r * wp.cos(phi), r * wp.sin(phi), z)
-        q = wp.mesh_query_ray(mesh, p, w, far)
-        if q.result:
-            t = tris[q.face]
-            a = positions[t[0]]
-            b = positions[t[1]]
-            c = positions[t[2]]
-            nt = wp.cross(b - a, c - a)
-            if wp.dot(nt, w) > 0.0:
-                backs += 1.0
-            else:
-                h = p + w * q.t
-                area = wp.length(nt)
-                wa = wp.length(wp.cross(b - h, c - h)) / area
-                wb = wp.length(wp.cross(c - h, a - h)) / area
-                wc = wp.max(1.0 - wa - wb, 0.0)
-                f = 3 * q.face
-                seen = radiance[f] * wa + radiance[f + 1] * wb + radiance[f + 2] * wc
-                acc += wp.outer(sh9(w), seen * weight)
     for k in range(9):
         out[i, k] = wp.vec3(acc[k, 0], acc[k, 1], acc[k, 2])
-    back[i] = backs / float(rays)
 
 
-def grid_points(lo: np.ndarray, hi: np.ndarray, spacing: float) -> tuple:
-    """(float32[P,3] cell centres of the box lo…hi cut into cells at most ``spacing`` (m) wide,
+@wp.kernel
+def _ray_kernel(offset: int, mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
+                turns: wp.array(dtype=wp.float32), rays: int, positions: wp.array(dtype=wp.vec3),
+                tris: wp.array(dtype=wp.vec3i), corner_normals: wp.array(dtype=wp.vec3),
+                far: float, direction: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
+                bary: wp.array(dtype=wp.vec3), hit: wp.array(dtype=wp.vec3),
+                normal: wp.array(dtype=wp.vec3)):
+    """Ray j of the batch: ray j % ``rays`` of probe j // ``rays`` (points, turns: of the batch's
+    probes). face[j]: the scene triangle it hits first, MISS or BACK (a back face); for a front
+    face, bary[j] the hit's barycentric weights of the triangle's corners, hit[j] its position
+    and normal[j] the interpolated shading normal (corner_normals: vec3[3T])."""
+    j = wp.tid() + offset
+    i = j // rays
+    p = points[i]
+    w = cone_sample_of(j - i * rays, rays, wp.vec3(0.0, 0.0, 1.0), -1.0, turns[i])
+    direction[j] = w
+    face[j] = MISS
+    q = wp.mesh_query_ray(mesh, p, w, far)
+    if q.result:
+        t = tris[q.face]
+        a = positions[t[0]]
+        b = positions[t[1]]
+        c = positions[t[2]]
+        nt = wp.cross(b - a, c - a)
+        if wp.dot(nt, w) > 0.0:
+            face[j] = BACK
+        else:
+            h = p + w * q.t
+            area = wp.length(nt)
+            wa = wp.length(wp.cross(b - h, c - h)) / area
+            wb = wp.length(wp.cross(c - h, a - h)) / area
+            wc = wp.max(1.0 - wa - wb, 0.0)
+            f = 3 * q.face
+            face[j] = q.face
+            bary[j] = wp.vec3(wa, wb, wc)
+            hit[j] = h
+            normal[j] = wp.normalize(corner_normals[f] * wa + corner_normals[f + 1] * wb
+                                     + corner_normals[f + 2] * wc)
+
+
+def grid_points(lo: np.ndarray, hi: np.ndarray, spacing) -> tuple:
+    """(float32[P,3] cell centres of the box lo…hi cut into cells at most ``spacing`` (m; float,
+    or float[3] per axis) wide,
     x fastest; (nx, ny, nz); float32[3] the cells' sizes)."""
     extent = np.maximum(np.asarray(hi, np.float64) - lo, 0.0)
     counts = np.maximum(np.ceil(extent / spacing - 1e-9), 1).astype(int)
@@ -117,10 +135,10 @@ def grid_points(lo: np.ndarray, hi: np.ndarray, spacing: float) -> tuple:
 
 class Target:
     """Light probes on a grid over ``box`` ((lo, hi) float[3] each, m, world; None: the scene's
-    bounds), cells at most ``spacing`` m (None: ``settings.probe_spacing``); its result is a
-    ``ProbeGrid``."""
+    bounds), cells at most ``spacing`` m (float or float[3] per axis; None:
+    ``settings.probe_spacing``); its result is a ``ProbeGrid``."""
 
-    def __init__(self, box: Optional[tuple] = None, spacing: Optional[float] = None):
+    def __init__(self, box: Optional[tuple] = None, spacing=None):
         self.box = box
         self.spacing = spacing
 
@@ -135,35 +153,73 @@ class Target:
             lo, hi = scene.positions.min(axis=0), scene.positions.max(axis=0)
         else:
             lo, hi = (np.asarray(b, np.float64) - origin for b in self.box)
-        spacing = self.spacing or problem.settings.probe_spacing
+        spacing = self.spacing if self.spacing is not None else problem.settings.probe_spacing
         points, shape, cell = grid_points(np.asarray(lo, np.float64), np.asarray(hi, np.float64),
                                           spacing)
-        sh, back = problem.stages.run("probes", self._gather, problem, points,
-                                      light.direct + light.indirect)
+        sh, back = problem.stages.run("probes", self._gather, problem, points, light)
         problem.counts["probes"] = len(points)
         return ProbeGrid(points=(points + origin).astype(np.float32), sh=sh, valid=back <= INSIDE,
                          shape=shape, spacing=cell)
 
     @staticmethod
-    def _gather(problem, points: np.ndarray, lighting: np.ndarray) -> tuple:
+    def _gather(problem, points: np.ndarray, light: receivers_mod.Light) -> tuple:
         """(float32[P,9,3] SH, float32[P] back-face share) at P points (problem frame) from the
-        elements' lighting float32[n,3]."""
-        scene = problem.scene
-        corner = problem.elements.corner  # the element of each triangle corner
-        sent = scene.albedo[:, None, :] * lighting[corner]  # [T,3 corners,3]
-        dev = problem.device
+        elements' solved ``light``: direct light from the emitters, then RAYS rays a probe in
+        batches of BATCH_RAYS at most."""
+        scene, settings, dev = problem.scene, problem.settings, problem.device
         d = dev.name
         count = len(points)
-        out = wp.zeros((count, 9), dtype=wp.vec3, device=d)
-        back = wp.zeros(count, dtype=wp.float32, device=d)
+        direct = wp.zeros((count, 9), dtype=wp.vec3, device=d)
+        points_d = wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d)
+        device_mod.launch(_direct_kernel, count,
+                          [problem.mesh.id, problem.lights.emitters, points_d,
+                           int(settings.light_samples), int(settings.seed), problem.far, direct],
+                          dev, chunks=max(1, min(32, count // 16)))
+        sh = direct.numpy().astype(np.float64)
+        back = np.zeros(count, np.float32)
+        turns = np.random.default_rng(settings.seed).random(count) * 2.0 * np.pi
+        step = max(1, BATCH_RAYS // RAYS)
+        for first in range(0, count, step):
+            part = slice(first, min(first + step, count))
+            sh[part] += Target._indirect(problem, points[part], turns[part], light.indirect,
+                                         first, count, back[part])
+            problem.stages.check()
+        return sh.astype(np.float32), back
+
+    @staticmethod
+    def _indirect(problem, points: np.ndarray, turns: np.ndarray, indirect: np.ndarray,
+                  first: int, count: int, back: np.ndarray) -> np.ndarray:
+        """float64[B,9,3]: the SH of the light B probes (points float32[B,3], problem frame; turns
+        float[B] of their ray sets) get from the surfaces their rays hit, whose radiance is ρ ×
+        (direct light traced at the hit + the elements' ``indirect`` float32[n,3] interpolated);
+        fills ``back`` float32[B] with each probe's back-face share. ``first``: the first probe's
+        index among all ``count`` (it seeds the hits' shadow rays)."""
+        scene, settings, dev = problem.scene, problem.settings, problem.device
+        d = dev.name
+        n = len(points) * RAYS
+        out = {k: wp.zeros(n, dtype=t, device=d) for k, t in
+               (("direction", wp.vec3), ("face", wp.int32), ("bary", wp.vec3), ("hit", wp.vec3),
+                ("normal", wp.vec3))}
         device_mod.launch(
-            _probe_kernel, count,
-            [problem.mesh.id, problem.lights.emitters,
-             wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
-             problem.mesh.points, wp.array(np.ascontiguousarray(scene.triangles, np.int32),
-                                           dtype=wp.vec3i, device=d),
-             wp.array(np.ascontiguousarray(sent.reshape(-1, 3), np.float32), dtype=wp.vec3, device=d),
-             RAYS, int(problem.settings.light_samples), int(problem.settings.seed), problem.far,
-             out, back],
-            dev, chunks=max(1, min(32, count // 16)))
-        return out.numpy().astype(np.float32), back.numpy()
+            _ray_kernel, n,
+            [problem.mesh.id, wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec3, device=d),
+             wp.array(np.asarray(turns, np.float32), dtype=wp.float32, device=d), RAYS,
+             problem.mesh.points,
+             wp.array(np.ascontiguousarray(scene.triangles, np.int32), dtype=wp.vec3i, device=d),
+             wp.array(np.ascontiguousarray(scene.corner_normals.reshape(-1, 3), np.float32),
+                      dtype=wp.vec3, device=d),
+             problem.far, *out.values()], dev, chunks=max(1, min(32, n // 65536)))
+        face = out["face"].numpy()
+        back[:] = (face == BACK).reshape(-1, RAYS).mean(axis=1)
+        front = np.flatnonzero(face >= 0)
+        tri = face[front]
+        sizes = np.sqrt(scene.triangle_areas()).astype(np.float32)[tri]
+        lit, _, _, _ = estimate(problem, out["hit"].numpy()[front], out["normal"].numpy()[front],
+                                sizes, np.full(len(front), MODE_FULL, np.int32), HIT_SAMPLES,
+                                int(settings.seed) + 1, first=first * RAYS, whole=count * RAYS)
+        bary = out["bary"].numpy()[front]
+        between = np.einsum("hk,hkc->hc", bary, indirect[problem.elements.corner[tri]])
+        radiance = np.zeros((n, 3), np.float64)
+        radiance[front] = scene.albedo[tri] * (lit + between) * (4.0 * np.pi / RAYS)
+        basis = sh9_numpy(out["direction"].numpy()).reshape(len(points), RAYS, 9)
+        return np.einsum("prk,prc->pkc", basis, radiance.reshape(len(points), RAYS, 3))

@@ -138,3 +138,27 @@ def test_the_directional_exr_holds_l0_and_l1_channels(tmp_path):
     back = files.read_exr(path)
     np.testing.assert_array_equal(back[..., :3], page.rgb)
     np.testing.assert_array_equal(back[..., 3:], page.l1)
+
+
+def test_engine_layouts_decode_to_l0_at_the_texel_normal_and_half_the_l1_tilt_beside_it():
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(4, 5, 3))
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    l0 = rng.uniform(0.1, 2.0, size=(4, 5, 3)).astype(np.float32)
+    # L1 per channel: l0 along n plus any part across n (L1 · n = L0)
+    across = rng.normal(size=(4, 5, 3, 3)) * 0.3
+    across -= np.einsum("hwcj,hwj->hwc", across, n)[..., None] * n[:, :, None, :]
+    l1_rgb = l0[..., None] * n[:, :, None, :] + across  # [H,W,channel,axis]
+    l1 = l1_rgb.transpose(0, 1, 3, 2).reshape(4, 5, 9).astype(np.float32)
+    tilted = n + rng.normal(size=n.shape) * 0.3
+    tilted /= np.linalg.norm(tilted, axis=2, keepdims=True)
+
+    t = directional.godot_layers(l0, l1)
+    for normal, expected in ((n, l0), (tilted, 0.5 * l0 + 0.5 * np.einsum("hwcj,hwj->hwc", l1_rgb, tilted))):
+        g = sum((t[k] - 0.5) * 2.0 * normal[..., axis, None] for k, axis in ((1, 1), (2, 2), (3, 0)))
+        np.testing.assert_allclose(t[0] + 4.0 * t[0] * g, expected, rtol=1e-5, atol=1e-6)
+
+    d = directional.unity_direction(l0, l1)
+    assert d.min() >= 0.0 and d.max() <= 1.0
+    half_lambert = np.einsum("hwj,hwj->hw", d[..., :3] - 0.5, n) + 0.5
+    np.testing.assert_allclose(l0 * (half_lambert / d[..., 3])[..., None], l0, rtol=1e-5)
