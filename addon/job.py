@@ -13,7 +13,8 @@ written, since the file may have changed during a modal bake.
 With ``settings.scheduler`` the bake runs on a Dask cluster (``core.farm``, connected before
 anything is extracted): an animation's frames are submitted as tasks as they are extracted (the
 first one waited for when a writer lays out from it) and collected in order after the last; a
-single frame is solved here and its lightmap pages baked as tasks. Writing stays here.
+single frame is solved here and the parts of its targets that split (one page each) baked as
+tasks. Writing stays here.
 """
 from __future__ import annotations
 
@@ -244,7 +245,7 @@ class BakeJob:
                 return
             if self.farm is not None:
                 result = farm_mod.bake_split(self.farm, self.extraction.scene, self.settings, targets,
-                                             self._on_progress, self._cancel, self._notify)
+                                             self.progress, self._cancel, self._notify)
             else:
                 result = self._sequence.bake(self.extraction.scene, targets, label)
             self._baked(result, time.perf_counter() - t0)
