@@ -54,3 +54,18 @@ def test_an_animations_frames_baked_on_a_local_cluster_equal_the_frames_baked_he
     assert not np.array_equal(values["here"][0], values["here"][2])  # the lamp moved
     for here, farm in zip(values["here"], values["farm"]):
         np.testing.assert_array_equal(here, farm)
+
+
+def test_the_panels_bake_sends_the_pages_to_the_scheduler_it_names(lit_blend, tmp_path):
+    bpy.ops.wm.open_mainfile(filepath=str(lit_blend))
+    s = bpy.context.scene.radiosity_baker
+    s.method, s.light_samples, s.target, s.layout = "direct", 4, "lightmap", "per_object"
+    s.max_size, s.texel_density, s.output = 32, 5.0, str(tmp_path / "panel")
+    s.scheduler = "local:2"
+    assert bpy.ops.object.radiosity_bake(use_selected=False) == {"FINISHED"}
+    baked = sorted(p.name for p in (tmp_path / "panel").glob("*.exr"))
+    s.scheduler, s.output, s.reunwrap = "", str(tmp_path / "here"), True  # lay out afresh as the first did
+    assert bpy.ops.object.radiosity_bake(use_selected=False) == {"FINISHED"}
+    assert len(baked) == 2 and baked == sorted(p.name for p in (tmp_path / "here").glob("*.exr"))
+    for name in baked:
+        assert np.array_equal(files.read_exr(tmp_path / "panel" / name), files.read_exr(tmp_path / "here" / name))
