@@ -214,3 +214,15 @@ def test_a_closed_emitter_lights_every_lightmap_texel_inside_by_its_radiance(tmp
     page, = result["lightmap"].pages
     assert page.covered.sum() > 1000
     np.testing.assert_allclose(page.rgb[page.covered], 1.0, rtol=0.005)
+
+
+@pytest.mark.parametrize("method, shape", [("reference", "cube"), ("hierarchical", "icosphere3")])
+def test_a_closed_emitter_furnace_reaches_the_analytic_radiosity(method, shape):
+    """Radiance 1 and albedo 0.5 all round: B = E/(1 − ρ) = 2 at every vertex, with the direct light
+    each solver is given by the bake itself. Bound 1 %; measured worst vertex 0.29 % (reference,
+    cube) and 0.44 % (hierarchical, icosphere 3); the reference on icosphere 3 −0.34 % (84 s: not
+    run here). Coarser spheres read low by their tessellation: icosphere 2 −1.0 % (reference) and
+    −0.9 % (hierarchical), element disks sitting at their triangles' corners."""
+    result = bake(furnace(shape), Settings(method=method, content="combined", light_samples=64))
+    np.testing.assert_allclose(result.direct, 1.0, rtol=0.005)
+    np.testing.assert_allclose(result.output, 2.0, rtol=0.01)
