@@ -1,6 +1,6 @@
 """Scenes built in code for ``bench/accuracy.py`` (issue 20): light from emissive surfaces.
 
-- ``flat_furnace``: a closed flat-shaded icosphere (3 subdivisions, 1 280 triangles) seen from
+- ``flat_furnace``: a closed flat-shaded icosphere (Blender's subdivisions 3: 320 triangles) seen from
   inside, every face emitting radiance 1 with albedo 0.5: lighting 2 at every vertex
   (B = E/(1−ρ)), direct light 1.
 - ``emissive_room``: a closed 4 × 3 × 2.6 m room (albedo 0.7, 0.2 m cells) with a block on the
