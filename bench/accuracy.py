@@ -1,10 +1,12 @@
 """Accuracy and speed of every method against Cycles, in one run (issues #3 and #5).
 
-    .venv/bin/python bench/accuracy.py [--scenes cornell_box lamp_scene] [--methods direct reference bunnell]
+    .venv/bin/python bench/accuracy.py [--scenes cornell_box lamp_scene flat_furnace emissive_room]
+                                       [--methods direct reference bunnell]
                                        [--samples 16 64 256 1024] [--reference-samples 4096]
                                        [--no-ao] [--device auto|cpu|cuda]
 
-For each sample scene, two quantities, each against Cycles bakes of the same vertices at each
+For each scene — the sample scenes, and built in code (``bench/emissive_scenes.py``) a closed
+flat-shaded emissive furnace and a room lit by a 2 304-triangle emissive sign — two quantities, each against Cycles bakes of the same vertices at each
 sample count and at a high sample count taken as the truth:
 
 - lighting (DIFFUSE, Direct + Indirect, no Color) for each method of ours: relative RMSE, mean
@@ -45,6 +47,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "addon"))
 from test_reference_vs_cycles import receivers  # noqa: E402  (the same receiver choice as the test)
 from test_lightmap_vs_cycles import _next_to_a_jump  # noqa: E402  (the same texels left out)
+sys.path.insert(0, str(ROOT / "bench"))
+import emissive_scenes  # noqa: E402  (scenes built in code: the flat-shaded furnace, the emissive room)
 
 
 # What each quantity is baked as in Cycles, how errors are summarised, and which summary entry the
@@ -114,7 +118,11 @@ def run_quantity(names, quantity, runs, samples, reference_samples):
 
 
 def run_scene(scene_name, methods, samples, reference_samples, device, with_ao):
-    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / f"{scene_name}.blend"))
+    """One sample scene (``sample_blends``) or scene built in code (``emissive_scenes.SCENES``)."""
+    if scene_name in emissive_scenes.SCENES:
+        emissive_scenes.SCENES[scene_name]()
+    else:
+        bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / f"{scene_name}.blend"))
     scene = bpy.context.scene
     names = receivers(scene)
     print(f"{scene_name}: {', '.join(names)}", flush=True)

@@ -26,7 +26,7 @@ import warp as wp
 from . import device as device_mod
 from . import lighttree
 from .formfactor import outline_ff, tangent_frame, triangle_ff
-from .rays import lift, visible
+from .rays import lift, lift_towards, visible
 from .scene import LAMP_AREA, LAMP_SPOT, LAMP_SUN, SceneData
 from .sh import moment_of
 
@@ -190,15 +190,16 @@ def _disk(s: wp.vec2, u: wp.vec3, v: wp.vec3, rx: float, ry: float) -> wp.vec3:
 
 @wp.func
 def _weighted_visibility(mesh: wp.uint64, origin: wp.vec3, p: wp.vec3, n: wp.vec3, q: wp.vec3,
-                         nq: wp.vec3) -> wp.vec2:
-    """(w, w·V) for a sample q of a planar sender with normal nq: w = cos_R·|cos_E|/d², the
-    transfer kernel, and V the visibility of q (no ray where w = 0)."""
+                         nq: wp.vec3, size: float) -> wp.vec2:
+    """(w, w·V) for a sample q of a planar sender with normal nq (any length) and feature size
+    ``size`` (m): w = cos_R·|cos_E|/d², the transfer kernel, and V the visibility of q, its ray
+    ending off the sender on the receiver's side (``lift_towards``; no ray where w = 0)."""
     d = q - p
     d2 = wp.dot(d, d)
     w = wp.max(wp.dot(n, d), 0.0) * wp.abs(wp.dot(nq, d)) / (d2 * d2 + 1.0e-30)
     if w <= 0.0:
         return wp.vec2(0.0, 0.0)
-    return wp.vec2(w, w * visible(mesh, origin, q))
+    return wp.vec2(w, w * visible(mesh, origin, lift_towards(q, nq, origin, size)))
 
 
 @wp.func
@@ -317,7 +318,7 @@ def _lamp_shadow(g: Emitters, mesh: wp.uint64, l: int, p: wp.vec3, n: wp.vec3, o
             q = c + _disk(st, g.lamp_u[l], g.lamp_v[l], hx, hy)
             if g.lamp_shape[l] == 0:
                 q = c + g.lamp_u[l] * (hx * (2.0 * st[0] - 1.0)) + g.lamp_v[l] * (hy * (2.0 * st[1] - 1.0))
-            acc += _weighted_visibility(mesh, origin, p, n, q, g.lamp_dir[l])
+            acc += _weighted_visibility(mesh, origin, p, n, q, g.lamp_dir[l], hx + hy)
         if acc[0] <= 0.0:
             return 0.0, k1 - k0
         return acc[1] / acc[0], k1 - k0
@@ -350,12 +351,8 @@ def _lamp_shadow(g: Emitters, mesh: wp.uint64, l: int, p: wp.vec3, n: wp.vec3, o
 @wp.func
 def _triangle_transfer(g: Emitters, e: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
     """Unoccluded lighting of emissive triangle e at p (normal n): its radiance × the exact form
-    factor (both faces emit)."""
-    a = g.em_v0[e]
-    nt = wp.cross(g.em_v1[e] - a, g.em_v2[e] - a)
-    if wp.abs(wp.dot(p - a, nt)) <= 1.0e-6 * wp.length(nt) * wp.length(p - a):
-        return wp.vec3(0.0)  # receiver in the emitter's plane sees it edge-on
-    ff = triangle_ff(p, n, a, g.em_v1[e], g.em_v2[e])
+    factor (both faces emit; none where p lies in its plane, ``triangle_ff``)."""
+    ff = triangle_ff(p, n, g.em_v0[e], g.em_v1[e], g.em_v2[e])
     if ff <= 0.0:
         return wp.vec3(0.0)
     return g.em_radiance[e] * ff
@@ -372,12 +369,13 @@ def _triangle_shadow(g: Emitters, mesh: wp.uint64, e: int, p: wp.vec3, n: wp.vec
     b = g.em_v1[e]
     c = g.em_v2[e]
     nt = wp.cross(b - a, c - a)
+    size = wp.sqrt(0.5 * wp.length(nt))
     acc = wp.vec2(0.0, 0.0)
     for k in range(k0, k1):
         st = sample2d(k, rot)
         r = wp.sqrt(st[0])
         q = a * (1.0 - r) + b * (r * (1.0 - st[1])) + c * (r * st[1])
-        acc += _weighted_visibility(mesh, origin, p, n, q, nt)
+        acc += _weighted_visibility(mesh, origin, p, n, q, nt, size)
     if acc[0] <= 0.0:
         return 0.0, k1 - k0
     return acc[1] / acc[0], k1 - k0

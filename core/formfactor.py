@@ -13,8 +13,10 @@ INV_TWO_PI = 0.15915494309189535
 # edge-on and contributes nothing.
 HORIZON_EPS = 1.0e-5
 # A triangle counts for a point only if the point lies off its plane by more than this fraction of
-# the triangle's size plus their distance: a point on the triangle itself (a receiver on its own
-# surface, up to rounding) sees it edge-on, whichever side the rounding puts it.
+# the triangle's size plus their distance: a point on the triangle itself, on its edge or at its
+# corner (a receiver on its own surface or on a neighbour's, up to rounding) sees it edge-on,
+# whichever side the rounding puts it. Measured from the triangle's size, not only from the
+# distance, which vanishes at its corners.
 PLANE_EPS = 1.0e-5
 # Outline shapes (outline_point); rectangle and ellipse match core.scene's SHAPE_* codes.
 OUTLINE_RECTANGLE, OUTLINE_ELLIPSE, OUTLINE_TRIANGLE = 0, 1, 2
@@ -56,9 +58,28 @@ def clip_edge_term(a: wp.vec3, b: wp.vec3, n: wp.vec3):
 
 
 @wp.func
+def plane_side(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
+    """The side of triangle abc's plane point p lies on: 1 along its winding's normal (b−a)×(c−a),
+    −1 against it, 0 in the plane up to rounding (PLANE_EPS of the triangle's size plus p's
+    distance): there the triangle is seen edge-on and sends nothing to p."""
+    nt = wp.cross(b - a, c - a)
+    lnt = wp.length(nt)
+    h = wp.dot(p - a, nt)
+    tol = PLANE_EPS * lnt * (wp.length(p - a) + wp.sqrt(lnt))
+    if h > tol:
+        return 1.0
+    if h < -tol:
+        return -1.0
+    return 0.0
+
+
+@wp.func
 def triangle_ff(p: wp.vec3, n: wp.vec3, v0: wp.vec3, v1: wp.vec3, v2: wp.vec3) -> float:
     """Exact unoccluded form factor from point p (normal n) to triangle v0 v1 v2, either side facing,
-    clipped to p's horizon."""
+    clipped to p's horizon; 0 where p lies in its plane (``plane_side``: on the triangle, its edge
+    or corner, where the contour integral's limit depends on the side rounding puts p)."""
+    if plane_side(p, v0, v1, v2) == 0.0:
+        return 0.0
     return outline_ff(p, n, OUTLINE_TRIANGLE, 3, v0, v1, v2, 0.0, 0.0)
 
 
@@ -74,11 +95,8 @@ def fan_ff(p: wp.vec3, n: wp.vec3, j: int, side: float, fan_offsets: wp.array(dt
         a = points[tris[3 * t]]
         b = points[tris[3 * t + 1]]
         c = points[tris[3 * t + 2]]
-        nt = wp.cross(b - a, c - a)
-        h = side * wp.dot(p - a, nt)
-        lnt = wp.length(nt)
-        if h > PLANE_EPS * lnt * (wp.length(p - a) + wp.sqrt(lnt)):
-            s += triangle_ff(p, n, a, b, c)
+        if side * plane_side(p, a, b, c) > 0.0:
+            s += outline_ff(p, n, OUTLINE_TRIANGLE, 3, a, b, c, 0.0, 0.0)
     return s / 3.0
 
 

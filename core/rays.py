@@ -23,6 +23,18 @@ def lift(p: wp.vec3, n: wp.vec3, size: float) -> wp.vec3:
 
 
 @wp.func
+def lift_towards(q: wp.vec3, nq: wp.vec3, to: wp.vec3, size: float) -> wp.vec3:
+    """q moved off its surface (normal nq, any length, either sign) as ``lift`` does, to the side
+    of the point ``to``: where a shadow ray from ``to`` to a point of an emitter's own surface
+    ends, so it cannot hit that surface (float32 rounding of the ray–triangle test grows as the
+    ray grazes it, and a fixed fraction of the ray's length is too short for near emitters)."""
+    u = wp.normalize(nq)
+    if wp.dot(to - q, u) < 0.0:
+        u = -u
+    return lift(q, u, size)
+
+
+@wp.func
 def visible(mesh: wp.uint64, origin: wp.vec3, target: wp.vec3) -> float:
     """1 if nothing blocks the segment origin→target (stopping just short of target), else 0."""
     d = target - origin

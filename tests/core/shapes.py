@@ -56,6 +56,32 @@ def icosphere(radius: float = 1.0, subdivisions: int = 3, inward: bool = True):
     return (v * radius).astype(np.float32), nrm.astype(np.float32), np.ascontiguousarray(f, np.int32)
 
 
+def flat(p: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Flat shading of triangles t over positions p: each corner gets its face's normal (the side
+    its winding faces), float32[T,3,3]."""
+    p = np.asarray(p, np.float64)
+    normal = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    return np.repeat(normal[:, None], 3, 1).astype(np.float32)
+
+
+def torus(major: float = 1.0, minor: float = 0.4, around: int = 24, tube: int = 12, inward: bool = True):
+    """A closed torus about +Z (ring radius ``major``, tube radius ``minor``), ``around`` × ``tube``
+    quads; normals and winding face into the tube if ``inward``."""
+    u, v = np.meshgrid(np.arange(around) * 2 * np.pi / around, np.arange(tube) * 2 * np.pi / tube, indexing="ij")
+    u, v = u.ravel(), v.ravel()
+    ring = major + minor * np.cos(v)
+    pos = np.stack([ring * np.cos(u), ring * np.sin(u), minor * np.sin(v)], 1)
+    nrm = np.stack([np.cos(v) * np.cos(u), np.cos(v) * np.sin(u), np.sin(v)], 1)
+    idx = np.arange(around * tube).reshape(around, tube)
+    a, b = idx, np.roll(idx, -1, axis=0)
+    c, d = np.roll(b, -1, axis=1), np.roll(a, -1, axis=1)
+    tris = np.concatenate([np.stack([a.ravel(), b.ravel(), c.ravel()], 1), np.stack([a.ravel(), c.ravel(), d.ravel()], 1)])
+    if inward:
+        tris, nrm = tris[:, ::-1], -nrm
+    return pos.astype(np.float32), nrm.astype(np.float32), np.ascontiguousarray(tris, np.int32)
+
+
 def lamp(kind: int, position=(0, 0, 0), direction=(0, 0, -1), size=(0.0, 0.0), shape=0,
          power=(1.0, 1.0, 1.0), spot_size=0.0, spot_blend=0.0, axis_u=(1, 0, 0), axis_v=(0, 1, 0)) -> Lamps:
     def row(x):
@@ -67,12 +93,13 @@ def lamp(kind: int, position=(0, 0, 0), direction=(0, 0, -1), size=(0.0, 0.0), s
 
 
 def scene(parts, lamps: Lamps | None = None) -> SceneData:
-    """SceneData from [(positions, per-vertex normals, triangles, albedo rgb, emission rgb), ...]."""
+    """SceneData from [(positions, normals, triangles, albedo rgb, emission rgb), ...]: normals per
+    vertex [V,3] or per triangle corner [T,3,3] (``flat``)."""
     pos, nrm, tris, alb, emi, obj = [], [], [], [], [], []
     base = 0
     for k, (p, n, t, a, e) in enumerate(parts):
         pos.append(p)
-        nrm.append(n[t])
+        nrm.append(n[t] if n.ndim == 2 else n)
         tris.append(t + base)
         alb.append(np.tile(np.asarray(a, np.float32), (len(t), 1)))
         emi.append(np.tile(np.asarray(e, np.float32), (len(t), 1)))

@@ -159,3 +159,70 @@ def test_area_lamp_with_occluder_gives_a_soft_penumbra():
     assert np.all(frac[r < 0.2] < 0.02)
     assert np.all(frac[r > 1.4] > 0.98)
     assert ((frac > 0.1) & (frac < 0.9)).sum() > 20
+
+
+def closed_flat(shape):
+    """A closed flat-shaded surface seen from inside (normals inward; one element per face corner):
+    (positions, corner normals, triangles) parts for ``shapes.scene``."""
+    if shape.startswith("icosphere"):
+        p, _, t = shapes.icosphere(1.0, int(shape[len("icosphere"):]))
+        return [(p, shapes.flat(p, t), t)]
+    if shape == "cube":
+        return [(p, shapes.flat(p, t), t) for p, _, t in shapes.box(2.0, 4, inward=True)]
+    p, _, t = shapes.torus()
+    return [(p, shapes.flat(p, t), t)]
+
+
+def furnace(shape, albedo=0.5):
+    """``closed_flat(shape)`` emitting radiance 1 from every triangle, albedo ``albedo``."""
+    return shapes.scene([(p, n, t, (albedo,) * 3, (1.0,) * 3) for p, n, t in closed_flat(shape)])
+
+
+@pytest.mark.parametrize("shape", ["icosphere1", "icosphere2", "icosphere3", "cube"])
+def test_a_closed_emitter_lights_every_vertex_inside_by_its_radiance(shape):
+    """Inside a closed convex surface of radiance 1 every receiver sees emitters all round: direct
+    lighting 1. Each vertex's receivers lie on a face beside emitters that share its corner and
+    edges (its own face in its plane, the neighbours at grazing angles). Before the fix: up to 2
+    (the own face counted whole near its corner) and 3 % low (shadow rays hitting the emitter they
+    aim at). Bound 0.5 %; measured within 2·10⁻⁵."""
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (1.0,) * 3) for p, n, t in closed_flat(shape)], samples=64)
+    np.testing.assert_allclose(lit, 1.0, rtol=0.005)
+
+
+def test_inside_a_closed_torus_direct_light_converges_to_its_radiance():
+    """Inside a torus's tube the emitters hide each other: the light is 1 only as the visible
+    fractions of the partly hidden triangles add up, an unbiased estimate with noise. Bounds: mean
+    0.5 %, every vertex 2 % at 1024 samples (measured mean −0.1 %, worst vertex −1.0 %)."""
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (1.0,) * 3) for p, n, t in closed_flat("torus")], samples=1024)
+    assert lit.mean() == pytest.approx(1.0, rel=0.005)
+    np.testing.assert_allclose(lit, 1.0, rtol=0.02)
+
+
+def test_a_closed_emitter_lights_every_lightmap_texel_inside_by_its_radiance(tmp_path):
+    """Texels lie anywhere on the faces, also next to their corners and edges: the same 1 at every
+    covered texel of the flat-shaded icosphere's lightmap. Bound 0.5 %."""
+    from radiosity_baker.core.lightmap import LightmapObject, LightmapRequest
+
+    sc = furnace("icosphere2")
+    nt = sc.num_triangles
+    target = LightmapObject("part0", "part0", corner_vert=sc.triangles.ravel().astype(np.int32),
+                            corner_triangles=np.arange(3 * nt, dtype=np.int32).reshape(nt, 3),
+                            triangle_offset=0)
+    request = LightmapRequest([target], cache_dir=tmp_path)
+    result = bake(sc, Settings(method="direct", light_samples=64, texel_density=24.0, device="cpu"),
+                  targets=shapes.with_lightmap(request))
+    page, = result["lightmap"].pages
+    assert page.covered.sum() > 1000
+    np.testing.assert_allclose(page.rgb[page.covered], 1.0, rtol=0.005)
+
+
+@pytest.mark.parametrize("method, shape", [("reference", "cube"), ("hierarchical", "icosphere3")])
+def test_a_closed_emitter_furnace_reaches_the_analytic_radiosity(method, shape):
+    """Radiance 1 and albedo 0.5 all round: B = E/(1 − ρ) = 2 at every vertex, with the direct light
+    each solver is given by the bake itself. Bound 1 %; measured worst vertex 0.29 % (reference,
+    cube) and 0.44 % (hierarchical, icosphere 3); the reference on icosphere 3 −0.34 % (84 s: not
+    run here). Coarser spheres read low by their tessellation: icosphere 2 −1.0 % (reference) and
+    −0.9 % (hierarchical), element disks sitting at their triangles' corners."""
+    result = bake(furnace(shape), Settings(method=method, content="combined", light_samples=64))
+    np.testing.assert_allclose(result.direct, 1.0, rtol=0.005)
+    np.testing.assert_allclose(result.output, 2.0, rtol=0.01)
