@@ -697,14 +697,15 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
                            int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
                            out_count, link_count, values, seen, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
-        if oracle.visibility and oracle.rays > 0:
-            traced[0] += int(rays.numpy().sum(dtype=np.int64))
-        out_offset = wp.empty(q, dtype=wp.int32, device=d)
-        link_offset = wp.empty(q, dtype=wp.int32, device=d)
-        wp.utils.array_scan(out_count, out_offset, inclusive=False)
-        wp.utils.array_scan(link_count, link_offset, inclusive=False)
-        n_next = _int(out_offset, q - 1) + _int(out_count, q - 1)
-        n_links = _int(link_offset, q - 1) + _int(link_count, q - 1)
+        with device_mod.section("links.scan", dev):
+            if oracle.visibility and oracle.rays > 0:
+                traced[0] += int(rays.numpy().sum(dtype=np.int64))
+            out_offset = wp.empty(q, dtype=wp.int32, device=d)
+            link_offset = wp.empty(q, dtype=wp.int32, device=d)
+            wp.utils.array_scan(out_count, out_offset, inclusive=False)
+            wp.utils.array_scan(link_count, link_offset, inclusive=False)
+            n_next = _int(out_offset, q - 1) + _int(out_count, q - 1)
+            n_links = _int(link_offset, q - 1) + _int(link_count, q - 1)
         total += n_links
         if total * BYTES_PER_LINK + (q + n_next) * BYTES_PER_CANDIDATE > oracle.budget:
             return None
@@ -718,10 +719,11 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         qa, qb = next_a, next_b
     out = [wp.empty(total, dtype=dt, device=d) for dt in (wp.int32, wp.int32, wp.vec4, wp.vec2)]
     start = 0
-    for part in parts:
-        for dst, src in zip(out, part):
-            wp.copy(dst, src, dest_offset=start, count=src.size)
-        start += part[0].size
+    with device_mod.section("links.concatenate", dev):
+        for part in parts:
+            for dst, src in zip(out, part):
+                wp.copy(dst, src, dest_offset=start, count=src.size)
+            start += part[0].size
     return (*out, rounds)
 
 
@@ -764,7 +766,8 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     keys = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
     values = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
     device_mod.launch(_directed_kernel, pairs, [la, lb, keys, values], dev)
-    wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
+    with device_mod.section("links.sort", dev):
+        wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
     out = LinkSet()
     out.offsets = wp.zeros(n + 1, dtype=wp.int32, device=d)
     out.sender = wp.empty(max(count, 1), dtype=wp.int32, device=d)
