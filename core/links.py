@@ -66,9 +66,8 @@ DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
 # sort keys and values at twice their count, and the CSR entries (sender, transfer, normaliser,
 # visibility) of both directions.
 BYTES_PER_LINK = 88
-# Bytes per candidate pair in flight: the pair and its verdict, its decision, counts, values and
-# verdict out, the next queue.
-BYTES_PER_CANDIDATE = 60
+# Bytes per candidate pair in flight: the pair, its decision, counts and values, the next queue.
+BYTES_PER_CANDIDATE = 48
 # Brightness weights of the oracle (a node's brightest leaf over the scene's mean radiance) are
 # clamped to [WEIGHT_LOW, WEIGHT_HIGH]; sample leaves are drawn in proportion to area ×
 # (radiance + SAMPLE_FLOOR × the mean), so dim leaves keep some samples.
@@ -80,11 +79,6 @@ SAMPLE_FLOOR = 0.25
 CONE_WEIGHT = 4.0
 # A partly visible link is split while its estimate exceeds this fraction of the threshold.
 PARTIAL = 0.25
-# A pair split while its estimate is at most INHERIT × the threshold (its children are about to
-# link) first traces ``rays`` probe rays (``probe``): all free, its descendants inherit VISIBLE
-# and link without rays; all blocked, HIDDEN and are dropped; else (UNKNOWN) they trace their own.
-INHERIT = 4.0
-UNKNOWN, HIDDEN, VISIBLE = -1, 0, 1
 # The largest ratio of a link's sampled unoccluded transfer over its centroid form factor that a
 # single receiving point keeps (see _normaliser).
 JENSEN = 1.2
@@ -322,26 +316,6 @@ def element_ray(s: Surfels, i: int, j: int, u0: float, u1: float, u2: float) -> 
 
 
 @wp.func
-def probe(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: int, seed: int) -> int:
-    """The visibility verdict of pair (a, b) from ``rays`` of the reference's rays between
-    stratified sample leaves of the two nodes (drawn as ``sampled_transfer`` draws them): VISIBLE
-    when all are free, HIDDEN when none is, else UNKNOWN."""
-    state = wp.rand_init(seed + 1 + wp.max(a, b), wp.min(a, b))
-    shift = int(wp.randf(state) * float(rays))
-    free = int(0)
-    for k in range(rays):
-        la = sample_leaf(t, sm, a, (float(k) + wp.randf(state)) / float(rays))
-        lb = sample_leaf(t, sm, b, (float((k + shift) % rays) + wp.randf(state)) / float(rays))
-        free += int(element_ray(s, t.element[la], t.element[lb], wp.randf(state), wp.randf(state),
-                                wp.randf(state)))
-    if free == rays:
-        return VISIBLE
-    if free == 0:
-        return HIDDEN
-    return UNKNOWN
-
-
-@wp.func
 def _sample_terms(f: float, w: float, hit: float) -> wp.vec4:
     """One sample pair's part of a direction of ``sampled_transfer``: (weight w, weighted visible
     form factor, weighted form factor, plain visible form factor), f the form factor per sender
@@ -464,26 +438,19 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 
 
 @wp.kernel
-def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32),
-                   qv: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
-                   cone: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
-                   weight: wp.array(dtype=wp.float32), rays: int, visibility: int, inherit: float,
+def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
+                   s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
+                   weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
                    seed: int, sides: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
                    link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
-                   visible_out: wp.array(dtype=wp.vec2), verdict_out: wp.array(dtype=wp.int32),
-                   traced: wp.array(dtype=wp.int32)):
+                   visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int32)):
     """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
     a link, a link's (transfer to a, to b, normaliser to a, to b) and the visible fractions of
-    its transfers, the verdict its children inherit (``verdict_out``: VISIBLE, HIDDEN or UNKNOWN,
-    see ``probe``); the rays it traced in ``traced[i]`` (Warp's CPU atomics are not atomic across
-    our threads, so no shared counter). ``qv`` holds the verdict each candidate inherited: a
-    pair under a VISIBLE verdict links with unoccluded samples and no rays, one under HIDDEN is
-    dropped."""
+    its transfers; the rays it traced in ``traced[i]`` (Warp's CPU atomics are not atomic across
+    our threads, so no shared counter)."""
     i = wp.tid() + offset
     a = qa[i]
     b = qb[i]
-    verdict = qv[i]
-    traces = int(visibility != 0 and rays > 0 and verdict == UNKNOWN)
     dec = DROP
     count = int(0)
     out = wp.vec4(0.0)
@@ -503,10 +470,10 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
             eb = t.element[b]
             f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
             f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
-            if (f_ab > 0.0 or f_ba > 0.0 or sides == 2) and verdict != HIDDEN:
+            if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
                 dec = LINK
                 v = float(1.0)
-                if traces != 0:
+                if visibility != 0 and rays > 0:
                     v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
                     ray_count = rays
                 out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
@@ -514,7 +481,7 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
         else:
             need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
                              t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b], sides)
-            if need[2] > 0.0 and verdict != HIDDEN:
+            if need[2] > 0.0:
                 w = float(1.0)
                 if weighted != 0:
                     w = wp.max(weight[a], weight[b])
@@ -524,8 +491,8 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                 split = largest > threshold
                 if not split:
                     if rays > 0:
-                        out, seen = sampled_transfer(t, s, sm, a, b, rays, traces, seed, sides)
-                        if traces != 0:
+                        out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides)
+                        if visibility != 0:
                             ray_count = rays
                         split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
                     else:
@@ -535,9 +502,6 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                     if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
                         dec = LINK
                 if split:
-                    if traces != 0 and largest <= inherit * threshold:
-                        verdict = probe(t, s, sm, a, b, rays, seed)
-                        ray_count = rays
                     if leaf_a or (not leaf_b and need_b >= need_a):
                         dec = SPLIT_B
                         r = children(t, b)
@@ -551,9 +515,6 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
     link_count[i] = int(dec == LINK)
     values[i] = out
     visible_out[i] = wp.vec2(seen[0], seen[1])
-    verdict_out[i] = verdict
-    if dec == SPLIT_SELF:
-        verdict_out[i] = UNKNOWN
     traced[i] = ray_count
 
 
@@ -561,19 +522,16 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
 def _scatter_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
                     decision: wp.array(dtype=wp.int32), out_offset: wp.array(dtype=wp.int32),
                     link_offset: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
-                    visible_in: wp.array(dtype=wp.vec2), verdict: wp.array(dtype=wp.int32),
-                    next_a: wp.array(dtype=wp.int32), next_b: wp.array(dtype=wp.int32),
-                    next_v: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
+                    visible_in: wp.array(dtype=wp.vec2), next_a: wp.array(dtype=wp.int32),
+                    next_b: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
                     lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
                     lvisible: wp.array(dtype=wp.vec2)):
-    """Write candidate i's link, or its pairs of the next queue with the verdict they inherit, at
-    its scanned offsets."""
+    """Write candidate i's link, or its pairs of the next queue, at its scanned offsets."""
     i = wp.tid() + offset
     a = qa[i]
     b = qb[i]
     dec = decision[i]
     o = out_offset[i]
-    v = verdict[i]
     if dec == LINK:
         j = link_offset[i]
         la[j] = a
@@ -585,14 +543,12 @@ def _scatter_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtyp
         for c in range(r[0], r[1]):
             next_a[o] = canonical(t, c)
             next_b[o] = b
-            next_v[o] = v
             o += 1
     elif dec == SPLIT_B:
         r = children(t, b)
         for c in range(r[0], r[1]):
             next_a[o] = a
             next_b[o] = canonical(t, c)
-            next_v[o] = v
             o += 1
     elif dec == SPLIT_SELF:
         r = children(t, a)
@@ -600,7 +556,6 @@ def _scatter_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtyp
             for c2 in range(c, r[1]):
                 next_a[o] = canonical(t, c)
                 next_b[o] = canonical(t, c2)
-                next_v[o] = v
                 o += 1
 
 
@@ -728,7 +683,6 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     root = _canonical_root(tree)
     qa = wp.full(1, root, dtype=wp.int32, device=d)
     qb = wp.full(1, root, dtype=wp.int32, device=d)
-    qv = wp.full(1, UNKNOWN, dtype=wp.int32, device=d)
     parts, total, rounds = [], 0, 0
     while qa.size > 0:
         stages.check()
@@ -737,12 +691,11 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         decision, out_count, link_count = (wp.empty(q, dtype=wp.int32, device=d) for _ in range(3))
         values = wp.empty(q, dtype=wp.vec4, device=d)
         seen = wp.empty(q, dtype=wp.vec2, device=d)
-        verdict = wp.empty(q, dtype=wp.int32, device=d)
         rays = wp.empty(q, dtype=wp.int32, device=d)
         device_mod.launch(_oracle_kernel, q,
-                          [qa, qb, qv, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
-                           int(oracle.rays), int(oracle.visibility), float(INHERIT), int(oracle.seed) + 7919,
-                           int(oracle.sides), decision, out_count, link_count, values, seen, verdict, rays],
+                          [qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
+                           int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
+                           out_count, link_count, values, seen, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
         with device_mod.section("links.scan", dev):
             if oracle.visibility and oracle.rays > 0:
@@ -756,15 +709,14 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         total += n_links
         if total * BYTES_PER_LINK + (q + n_next) * BYTES_PER_CANDIDATE > oracle.budget:
             return None
-        next_a, next_b, next_v, la, lb = (wp.empty(k, dtype=wp.int32, device=d)
-                                          for k in (n_next, n_next, n_next, n_links, n_links))
+        next_a, next_b, la, lb = (wp.empty(k, dtype=wp.int32, device=d) for k in (n_next, n_next, n_links, n_links))
         lvalues = wp.empty(n_links, dtype=wp.vec4, device=d)
         lvisible = wp.empty(n_links, dtype=wp.vec2, device=d)
-        device_mod.launch(_scatter_kernel, q, [qa, qb, t, decision, out_offset, link_offset, values, seen, verdict,
-                                               next_a, next_b, next_v, la, lb, lvalues, lvisible], dev)
+        device_mod.launch(_scatter_kernel, q, [qa, qb, t, decision, out_offset, link_offset, values, seen,
+                                               next_a, next_b, la, lb, lvalues, lvisible], dev)
         if n_links:
             parts.append((la, lb, lvalues, lvisible))
-        qa, qb, qv = next_a, next_b, next_v
+        qa, qb = next_a, next_b
     out = [wp.empty(total, dtype=dt, device=d) for dt in (wp.int32, wp.int32, wp.vec4, wp.vec2)]
     start = 0
     with device_mod.section("links.concatenate", dev):
