@@ -159,6 +159,23 @@ def summary(row: dict) -> str:
             f"load {row['load_before'][0]}")
 
 
+def markdown(report: dict) -> str:
+    """The table README quotes: per scene and version, CPU seconds per category, the bake's wall
+    and CPU seconds, rays per link pair and link creation per CPU second."""
+    cats = list(CATEGORIES) + ["other kernels"]
+    lines = [f"| scene | version | {' | '.join(cats)} | bake wall (CPU) s | rays/pair | rays/CPU s | create links/CPU s |",
+             "| --- | --- |" + " ---: |" * (len(cats) + 4)]
+    for name, entry in report["scenes"].items():
+        for version, row in entry.items():
+            c = row["categories"]
+            cells = " | ".join(f"{c[k]['cpu_seconds']:.2f}" if k in c else "" for k in cats)
+            v, cr = row["visibility"], row["create"]
+            lines.append(f"| {name} ({row['counts']['elements']}) | {version} | {cells} | {row['bake']['seconds']:.1f} "
+                         f"({row['bake']['cpu_seconds']:.1f}) | {v['rays_per_link_pair']:.2f} | "
+                         f"{v['rays_per_cpu_second'] / 1e6:.2f} M | {cr['links_per_cpu_second'] / 1e6:.2f} M |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", default=list(SCENES))
@@ -184,6 +201,7 @@ def main(argv=None) -> int:
     report["load_after"] = load()
     import results_file
     results_file.write("profile", report)
+    print(markdown(report))
     return 0
 
 
