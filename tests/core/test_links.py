@@ -197,3 +197,43 @@ def test_a_profile_times_each_kernel_of_a_link_build_and_nothing_when_off():
     assert all(r["seconds"] >= 0 and r["cpu_seconds"] >= 0 for r in rows.values())
     links.build(problem, links.Oracle(threshold=0.1))
     assert table.as_dict() == rows
+
+
+def facing_plates(blocker: bool):
+    """Two 1 m plates 1 m apart facing each other (floor up, ceiling down), and optionally a 0.5 m
+    plate in the middle between them (facing both ways: two sides)."""
+    parts = [(*shapes.grid(1.0, 1, 0.0), (0.5,) * 3, (0,) * 3),
+             (*shapes.grid(1.0, 1, 1.0, flip=True), (0.5,) * 3, (0,) * 3)]
+    if blocker:
+        parts += [(*shapes.grid(0.5, 1, 0.5), (0.5,) * 3, (0,) * 3),
+                  (*shapes.grid(0.5, 1, 0.5, flip=True), (0.5,) * 3, (0,) * 3)]
+    return shapes.scene(parts)
+
+
+@pytest.mark.parametrize("blocker", [False, True])
+def test_a_clear_shaft_links_without_rays_and_a_blocked_one_traces_them(blocker):
+    """With nothing between the plates every link between them is made with no ray traced, and
+    its transfer is fully visible; with a plate between, rays are traced and links between the
+    plates' corners that face each other across it are hidden. Either way the links are those
+    the rays alone give."""
+    problem = Problem(facing_plates(blocker), CPU)
+    z = problem.elements.position[:, 2]
+    oracle = links.Oracle(threshold=0.1, rays=4)
+    made = links.build(problem, oracle)
+    plain = links.build(problem, links.Oracle(threshold=0.1, rays=4, shaft=False))
+    for x, y in zip(csr(made), csr(plain)):
+        np.testing.assert_array_equal(x, y)
+    receiver, sender, _, _, visible = csr(made)
+    leaf = problem.tree.nodes.element.numpy()
+    first, count = leaf_ranges(problem)
+    order = problem.tree.order.numpy()
+    height = np.array([z[order[f:f + c]].mean() for f, c in zip(first, count)])
+    across = (height[receiver] < z.min() + 0.25) & (height[sender] > z.max() - 0.25)
+    assert across.sum() > 0
+    if not blocker:
+        assert made.rays_traced == 0 and plain.rays_traced > 0
+        assert np.all(visible[across] == 255)
+    else:
+        assert made.rays_traced > 0
+        middle = (leaf[receiver] >= 0) & (leaf[sender] >= 0) & across
+        assert np.any(visible[middle] == 0)
