@@ -58,7 +58,7 @@ from . import device as device_mod
 from .errors import BakeError
 from .formfactor import cluster_ff, disk_ff
 from .hierarchy import Nodes
-from .rays import OFFSET, lift, visible
+from .rays import lift, visible
 from .surfels import Surfels, face_ff, fan_sample, pair_hits
 
 DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
@@ -89,11 +89,6 @@ TRIAL_MARGIN = 1.5
 # No estimate of pair_need exceeds this: at this threshold every pair of distinct nodes links.
 COARSEST = 2.0
 PI = math.pi
-# A shaft test gives up (the pair traces its rays) after visiting this many tree nodes.
-SHAFT_VISITS = 96
-# Relative slack of the shaft's sphere tests (of the pair's length plus its ends' radii): float32
-# rounding must not let a blocker through.
-SHAFT_SLACK = 2.0 ** -14
 
 
 @dataclass(frozen=True)
@@ -107,8 +102,6 @@ class Oracle:
     jitter. budget: bytes the links may take. brightness: a label of the radiance estimate passed
     to ``build`` (None: none: geometric refinement, samples by area), so links made with one are
     cached apart. sides: 1, senders send from their fronts; 2, from both faces (antiradiance).
-    shaft: with visibility, a pair whose shaft holds no geometry (``shaft_clear``) is visible
-    without tracing its rays (the same links: every ray it would trace is free).
     """
 
     threshold: float
@@ -118,7 +111,6 @@ class Oracle:
     budget: int = 4 << 30
     brightness: str | None = None
     sides: int = 1
-    shaft: bool = True
 
 
 @wp.struct
@@ -351,13 +343,11 @@ def _sample_terms(f: float, w: float, hit: float) -> wp.vec4:
 
 @wp.func
 def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: int, visibility: int,
-                     seed: int, sides: int, trace: int):
+                     seed: int, sides: int):
     """Link (a, b) from ``rays`` sample pairs (see the module docstring): ((transfer to a, to b,
     normaliser to a, to b), (visible fraction of the transfer to a, to b, plain visible fraction
     of the rays)). The normalisers (``centroid_ff`` of the sender from the receiving samples) are
-    averaged over the receiving end by area, as the transfer is. With visibility but ``trace`` 0
-    (a clear shaft) every ray counts as free, untraced; its samples are drawn all the same, so the
-    link is the one its rays would give."""
+    averaged over the receiving end by area, as the transfer is."""
     state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
     shift = int(wp.randf(state) * float(rays))
     # per direction (a receives from b, b from a): ``_sample_terms`` summed over the samples
@@ -382,11 +372,7 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
         eb = t.element[lb]
         hit = float(1.0)
         if visibility != 0:
-            u0 = wp.randf(state)
-            u1 = wp.randf(state)
-            u2 = wp.randf(state)
-            if trace != 0:
-                hit = element_ray(s, ea, eb, u0, u1, u2)
+            hit = element_ray(s, ea, eb, wp.randf(state), wp.randf(state), wp.randf(state))
         seen += hit
         f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
         f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
@@ -436,132 +422,6 @@ def _normaliser(unoccluded: float, centroid: float) -> float:
     return wp.clamp(centroid, unoccluded / JENSEN, unoccluded)
 
 
-@wp.struct
-class Shafts:
-    """What a shaft test knows of each node's geometry, over the triangles of its elements' fans
-    and the points its rays start or end at (``element_ray``: element points and fan samples,
-    lifted), around the node's centre ``Nodes.position`` and along its unit ``Nodes.normal``.
-
-    reach: vec2[m] (m) the radii of spheres around the centre holding the triangles, and the end
-    points; band: vec3[m] (m) (lowest, highest) height of the triangles along the normal, and the
-    lowest height of an end point (for a flat node just above its triangles: the rays' lift);
-    lo, hi: vec3[m] (m) the corners of an axis-aligned box holding the triangles; end_lo, end_hi:
-    vec3[m] (m) one holding the end points (a fan sample lies in the half of a fan triangle
-    nearest to the element's vertex)."""
-
-    reach: wp.array(dtype=wp.vec2)
-    band: wp.array(dtype=wp.vec3)
-    lo: wp.array(dtype=wp.vec3)
-    hi: wp.array(dtype=wp.vec3)
-    end_lo: wp.array(dtype=wp.vec3)
-    end_hi: wp.array(dtype=wp.vec3)
-
-
-@wp.func
-def hull_gap(p: wp.vec3, pa: wp.vec3, ra: float, pb: wp.vec3, rb: float) -> float:
-    """Distance (m) from point p to the convex hull of the spheres (pa, ra) and (pb, rb), negative
-    inside: the least over t ∈ [0, 1] of |p − c(t)| − r(t), centre and radius interpolated (the
-    hull is the union of those spheres; the function is convex, its minimum in closed form)."""
-    v = pb - pa
-    length = wp.length(v)
-    if length <= 0.0:
-        return wp.length(p - pa) - wp.max(ra, rb)
-    k = (rb - ra) / length
-    if wp.abs(k) >= 1.0:  # one sphere holds the other
-        return wp.min(wp.length(p - pa) - ra, wp.length(p - pb) - rb)
-    w = p - pa
-    along = wp.dot(w, v) / length
-    h = wp.sqrt(wp.max(wp.dot(w, w) - along * along, 0.0))
-    x = wp.clamp(along + k * h / wp.sqrt(1.0 - k * k), 0.0, length)
-    return wp.sqrt((along - x) * (along - x) + h * h) - ra - x * k
-
-
-@wp.func
-def box_range(n: wp.vec3, p: wp.vec3, lo: wp.vec3, hi: wp.vec3) -> wp.vec2:
-    """(least, greatest) of n·(x − p) over the box lo … hi (m)."""
-    c = (lo + hi) * 0.5 - p
-    h = (hi - lo) * 0.5
-    mid = wp.dot(n, c)
-    half = wp.abs(n[0]) * h[0] + wp.abs(n[1]) * h[1] + wp.abs(n[2]) * h[2]
-    return wp.vec2(mid - half, mid + half)
-
-
-@wp.func
-def heights(t: Nodes, sh: Shafts, x: int, ends: int, n: wp.vec3, p: wp.vec3) -> wp.vec2:
-    """(least, greatest) height along unit n from p (m) of node x's triangles (``ends`` 0) or ray
-    end points (1): the tighter of its box's and its sphere's."""
-    r = wp.vec2()
-    if ends != 0:
-        r = box_range(n, p, sh.end_lo[x], sh.end_hi[x])
-    else:
-        r = box_range(n, p, sh.lo[x], sh.hi[x])
-    c = wp.dot(n, t.position[x] - p)
-    rx = sh.reach[x][ends]
-    return wp.vec2(wp.max(r[0], c - rx), wp.min(r[1], c + rx))
-
-
-@wp.func
-def below(t: Nodes, sh: Shafts, x: int, e: int, other_low: float) -> int:
-    """1 if node x's triangles lie at or below every ray end point of node e, measured along e's
-    normal, and ``other_low`` (the lowest end point of the pair's other node along the same normal
-    from e's centre) is above them too: then no segment between the two can reach them (a flat
-    node's own surface, and what lies behind it)."""
-    n = t.normal[e]
-    top = wp.min(wp.dot(n, t.position[x] - t.position[e]) + sh.band[x][1] + wp.length(n - t.normal[x]) * sh.reach[x][0],
-                 heights(t, sh, x, 0, n, t.position[e])[1])
-    return int(top < sh.band[e][2] and top < other_low)
-
-
-@wp.func
-def shaft_clear(t: Nodes, sh: Shafts, a: int, b: int) -> int:
-    """1 if no triangle can block a visibility ray between nodes a and b (any of ``element_ray``'s
-    segments between their leaves), else 0 (unknown: trace the rays). A stackless walk of the
-    tree from its root skips a node whose triangles (box ``Shafts.lo`` … ``hi``, sphere
-    ``Shafts.reach``, height band ``Shafts.band``) lie outside the box around a's and b's boxes,
-    outside the convex hull of their spheres, below every ray end of a or of b (``below``), or in
-    a slab along their own normal that both ends are on one side of; a leaf that is not skipped,
-    or more than SHAFT_VISITS nodes, answer 0."""
-    pa = t.position[a]
-    pb = t.position[b]
-    ra = sh.reach[a][1]
-    rb = sh.reach[b][1]
-    slack = SHAFT_SLACK * (wp.length(pb - pa) + ra + rb)
-    room = wp.vec3(slack, slack, slack)
-    box_lo = wp.min(sh.end_lo[a], sh.end_lo[b]) - room
-    box_hi = wp.max(sh.end_hi[a], sh.end_hi[b]) + room
-    b_low = heights(t, sh, b, 1, t.normal[a], pa)[0] - slack  # b's lowest end along a's normal
-    a_low = heights(t, sh, a, 1, t.normal[b], pb)[0] - slack
-    x = t.root
-    visits = int(0)
-    clear = int(1)
-    while x >= 0:
-        visits += 1
-        lo = sh.lo[x]
-        hi = sh.hi[x]
-        skip = (lo[0] > box_hi[0] or lo[1] > box_hi[1] or lo[2] > box_hi[2] or hi[0] < box_lo[0]
-                or hi[1] < box_lo[1] or hi[2] < box_lo[2])
-        px = t.position[x]
-        if not skip:
-            skip = hull_gap(px, pa, ra, pb, rb) > sh.reach[x][0] + slack
-        if not skip:
-            n = t.normal[x]
-            ha = heights(t, sh, a, 1, n, px)
-            hb = heights(t, sh, b, 1, n, px)
-            band = sh.band[x]
-            skip = (ha[0] > band[1] + slack and hb[0] > band[1] + slack) or (
-                ha[1] < band[0] - slack and hb[1] < band[0] - slack)
-        if not skip:
-            skip = below(t, sh, x, a, b_low) != 0 or below(t, sh, x, b, a_low) != 0
-        if skip:
-            x = t.next[x]
-        elif t.descend[x] < 0 or visits >= SHAFT_VISITS:
-            clear = 0
-            x = -1
-        else:
-            x = t.descend[x]
-    return clear
-
-
 @wp.kernel
 def _cone_kernel(offset: int, node0: int, t: Nodes, angle: wp.array(dtype=wp.float32),
                  cone: wp.array(dtype=wp.vec2)):
@@ -575,102 +435,6 @@ def _cone_kernel(offset: int, node0: int, t: Nodes, angle: wp.array(dtype=wp.flo
     a = wp.min(a, PI)
     angle[node] = a
     cone[node] = wp.vec2(wp.cos(a), wp.sin(a))
-
-
-@wp.kernel
-def _leaf_shaft_kernel(offset: int, t: Nodes, s: Surfels, sh: Shafts):
-    """``Shafts`` of leaf k from its element's fan triangles: their corners' distances and heights
-    from its point along its normal. A ray's end point is the element's point or a point of the
-    half of a fan triangle at the element's vertex, lifted along the normal by ``rays.lift``
-    (OFFSET × (largest |coordinate| + √area), bounded over the fan's box); the lowest end height
-    counts half the least lift (float32 rounding of the lifted point). Boxes and spheres are grown
-    by the largest lift."""
-    k = wp.tid() + offset
-    e = t.element[k]
-    p = t.position[k]
-    n = t.normal[k]
-    pv = s.points[s.vertex[e]]
-    r = float(0.0)
-    r_end = float(0.0)
-    lo = float(0.0)
-    hi = float(0.0)
-    end_lo = float(0.0)
-    box_lo = p
-    box_hi = p
-    ends_lo = p
-    ends_hi = p
-    for f in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
-        tri = s.fan_triangles[f]
-        for c in range(3):
-            v = s.points[s.tris[3 * tri + c]]
-            q = pv + (v - pv) * 0.5  # a corner of the half fan triangle
-            r = wp.max(r, wp.length(v - p))
-            r_end = wp.max(r_end, wp.length(q - p))
-            h = wp.dot(n, v - p)
-            lo = wp.min(lo, h)
-            hi = wp.max(hi, h)
-            end_lo = wp.min(end_lo, wp.dot(n, q - p))
-            box_lo = wp.min(box_lo, v)
-            box_hi = wp.max(box_hi, v)
-            ends_lo = wp.min(ends_lo, q)
-            ends_hi = wp.max(ends_hi, q)
-    least = float(0.0)  # the largest |coordinate| over the box: at least, at most
-    most = float(0.0)
-    for c in range(3):
-        most = wp.max(most, wp.max(wp.abs(box_lo[c]), wp.abs(box_hi[c])))
-        if box_lo[c] > 0.0 or box_hi[c] < 0.0:
-            least = wp.max(least, wp.min(wp.abs(box_lo[c]), wp.abs(box_hi[c])))
-    size = wp.sqrt(wp.max(s.area[e], 0.0))
-    raised = OFFSET * (most + size)
-    grow = wp.vec3(raised, raised, raised)
-    sh.reach[k] = wp.vec2(r + raised, r_end + raised)
-    sh.lo[k] = box_lo - grow
-    sh.hi[k] = box_hi + grow
-    sh.end_lo[k] = ends_lo - grow
-    sh.end_hi[k] = ends_hi + grow
-    if wp.abs(wp.length(n) - 1.0) > 1.0e-3:  # no normal to measure heights along
-        sh.band[k] = wp.vec3(-r, r, -r)
-    else:
-        sh.band[k] = wp.vec3(lo, hi, end_lo + 0.5 * OFFSET * (least + size))
-
-
-@wp.kernel
-def _merge_shaft_kernel(offset: int, node0: int, t: Nodes, sh: Shafts):
-    """``Shafts`` of an inner node from its children's (already set): a child's heights along the
-    node's normal are its own moved by its centre's height, give or take |n − n_child| × its
-    reach; none beyond the node's reach. Its boxes hold its children's."""
-    node = node0 + wp.tid() + offset
-    p = t.position[node]
-    n = t.normal[node]
-    r = wp.vec2(0.0, 0.0)
-    c0 = t.first_child[node]
-    box_lo = sh.lo[c0]
-    box_hi = sh.hi[c0]
-    ends_lo = sh.end_lo[c0]
-    ends_hi = sh.end_hi[c0]
-    for c in range(c0, t.child_end[node]):
-        d = wp.length(t.position[c] - p)
-        r = wp.vec2(wp.max(r[0], d + sh.reach[c][0]), wp.max(r[1], d + sh.reach[c][1]))
-        box_lo = wp.min(box_lo, sh.lo[c])
-        box_hi = wp.max(box_hi, sh.hi[c])
-        ends_lo = wp.min(ends_lo, sh.end_lo[c])
-        ends_hi = wp.max(ends_hi, sh.end_hi[c])
-    lo = r[0]
-    hi = -r[0]
-    end_lo = r[1]
-    for c in range(c0, t.child_end[node]):
-        h = wp.dot(n, t.position[c] - p)
-        tilt = wp.length(n - t.normal[c])
-        band = sh.band[c]
-        lo = wp.min(lo, h + band[0] - tilt * sh.reach[c][0])
-        hi = wp.max(hi, h + band[1] + tilt * sh.reach[c][0])
-        end_lo = wp.min(end_lo, h + band[2] - tilt * sh.reach[c][1])
-    sh.reach[node] = r
-    sh.lo[node] = box_lo
-    sh.hi[node] = box_hi
-    sh.end_lo[node] = ends_lo
-    sh.end_hi[node] = ends_hi
-    sh.band[node] = wp.vec3(wp.max(lo, -r[0]), wp.min(hi, r[0]), wp.max(end_lo, -r[1]))
 
 
 @wp.kernel
@@ -700,14 +464,13 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
                    s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
                    weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
-                   seed: int, sides: int, shaft: int, sh: Shafts, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
+                   seed: int, sides: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
                    link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
                    visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int32)):
     """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
     a link, a link's (transfer to a, to b, normaliser to a, to b) and the visible fractions of
     its transfers; the rays it traced in ``traced[i]`` (Warp's CPU atomics are not atomic across
-    our threads, so no shared counter). With ``shaft`` (and visibility) a pair about to trace rays
-    first tests its shaft (``shaft_clear``, over ``sh``): clear, it is visible with no ray."""
+    our threads, so no shared counter)."""
     i = wp.tid() + offset
     a = qa[i]
     b = qb[i]
@@ -734,9 +497,8 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                 dec = LINK
                 v = float(1.0)
                 if visibility != 0 and rays > 0:
-                    if shaft == 0 or shaft_clear(t, sh, a, b) == 0:
-                        v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
-                        ray_count = rays
+                    v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
+                    ray_count = rays
                 out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
                 seen = wp.vec3(v, v, v)
         else:
@@ -752,11 +514,9 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                 split = largest > threshold
                 if not split:
                     if rays > 0:
-                        trace = int(visibility != 0)
-                        if trace != 0 and shaft != 0:
-                            trace = 1 - shaft_clear(t, sh, a, b)
-                        out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides, trace)
-                        ray_count = rays * trace
+                        out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides)
+                        if visibility != 0:
+                            ray_count = rays
                         split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
                     else:
                         f_ab = centre_ff(t, s, a, b, sides)
@@ -875,20 +635,6 @@ def cones(tree) -> wp.array:
     return cone
 
 
-def shafts(tree, surfels: Surfels) -> Shafts:
-    """The ``Shafts`` of every node of ``tree``: one launch over the leaves, then one per level."""
-    dev = tree.device
-    sh = Shafts()
-    sh.reach = wp.empty(tree.count, dtype=wp.vec2, device=dev.name)
-    sh.band, sh.lo, sh.hi, sh.end_lo, sh.end_hi = (wp.empty(tree.count, dtype=wp.vec3, device=dev.name)
-                                                   for _ in range(5))
-    offs = tree.level_offsets
-    device_mod.launch(_leaf_shaft_kernel, int(offs[1]), [tree.nodes, surfels, sh], dev)
-    for lv in range(1, len(offs) - 1):
-        device_mod.launch(_merge_shaft_kernel, int(offs[lv + 1] - offs[lv]), [int(offs[lv]), tree.nodes, sh], dev)
-    return sh
-
-
 def leaf_luminance(tree, radiance: np.ndarray) -> np.ndarray:
     """float64[n]: the luminance of ``radiance`` (float32[n,3] per element) in leaf order."""
     lum = np.asarray(radiance, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
@@ -954,13 +700,6 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     d = dev.name
     t = tree.nodes
     cone = cones(tree)
-    shaft = bool(oracle.shaft and oracle.visibility and oracle.rays > 0)
-    if shaft:
-        sh = shafts(tree, problem.surfels)
-    else:
-        sh = Shafts()
-        sh.reach = wp.zeros(1, dtype=wp.vec2, device=d)
-        sh.band, sh.lo, sh.hi, sh.end_lo, sh.end_hi = (wp.zeros(1, dtype=wp.vec3, device=d) for _ in range(5))
     weighted = weight is not None
     if weight is None:
         weight = wp.zeros(1, dtype=wp.float32, device=d)
@@ -978,7 +717,7 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         rays = wp.empty(q, dtype=wp.int32, device=d)
         device_mod.launch(_oracle_kernel, q,
                           [qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
-                           int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), int(shaft), sh, decision,
+                           int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
                            out_count, link_count, values, seen, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
         with device_mod.section("links.scan", dev):
