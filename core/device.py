@@ -3,6 +3,11 @@
 Warp runs a CPU launch serially on the calling thread (releasing the GIL), so a large launch is split
 into ranges run by one Python thread per core. Kernels launched through :func:`launch` take the
 offset of their range as the first argument: ``i = wp.tid() + offset``.
+
+Inside ``with profiling() as table:`` every launch through :func:`launch` adds its wall seconds,
+process CPU seconds and thread count under its kernel's name (``module.kernel``), and blocks
+wrapped in :func:`section` (scans, sorts, copies back: work that is not a launch) add theirs under
+the section's name. Off (the default), a launch pays one comparison for it.
 """
 from __future__ import annotations
 
@@ -11,10 +16,11 @@ import os
 import sys
 import tempfile
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable, Optional
+from typing import Callable, Iterator, Optional
 
 import warp as wp
 
@@ -130,6 +136,69 @@ def _cached(module, device: Device) -> bool:
     return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, ident))
 
 
+class Profile:
+    """Where the time of a profiled block went: per kernel or section name, calls, threads (the
+    launch's size, summed over calls), wall seconds and process CPU seconds (all threads; on a
+    shared machine CPU seconds are the steadier measure of work)."""
+
+    def __init__(self):
+        self.rows: dict[str, dict] = {}
+
+    def add(self, name: str, threads: int, wall: float, cpu: float) -> None:
+        row = self.rows.setdefault(name, {"calls": 0, "threads": 0, "seconds": 0.0, "cpu_seconds": 0.0})
+        row["calls"] += 1
+        row["threads"] += threads
+        row["seconds"] += wall
+        row["cpu_seconds"] += cpu
+
+    def as_dict(self) -> dict:
+        """{name: {calls, threads, seconds, cpu_seconds}}, the slowest first, seconds rounded to µs."""
+        order = sorted(self.rows.items(), key=lambda kv: -kv[1]["seconds"])
+        return {k: {**v, "seconds": round(v["seconds"], 6), "cpu_seconds": round(v["cpu_seconds"], 6)}
+                for k, v in order}
+
+
+_profile: Optional[Profile] = None
+
+
+@contextmanager
+def profiling() -> Iterator[Profile]:
+    """Collect a ``Profile`` of the launches and sections run inside the block (from the thread
+    that launches; nested uses collect into their own table)."""
+    global _profile
+    outer = _profile
+    _profile = Profile()
+    try:
+        yield _profile
+    finally:
+        _profile = outer
+
+
+@contextmanager
+def section(name: str, device: Device):
+    """Time the block under ``name`` while profiling (synchronising ``device`` first and after, so
+    a GPU's queued work is counted where it runs); nothing otherwise. For work that is not a
+    launch through :func:`launch`, which times itself."""
+    if _profile is None:
+        yield
+        return
+    table = _profile
+    if device.is_cuda:
+        wp.synchronize_device(device.name)
+    t0, c0 = time.perf_counter(), time.process_time()
+    try:
+        yield
+    finally:
+        if device.is_cuda:
+            wp.synchronize_device(device.name)
+        table.add(name, 0, time.perf_counter() - t0, time.process_time() - c0)
+
+
+def kernel_name(kernel) -> str:
+    """``module.kernel`` (the module's last component): how a profile names a launch."""
+    return f"{kernel.module.name.rpartition('.')[2]}.{kernel.key}"
+
+
 def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
            on_chunk: Optional[Callable[[float], None]] = None, serial: bool = False) -> None:
     """Launch ``kernel`` over ``n`` threads, ``kernel(offset, *inputs)``.
@@ -142,6 +211,9 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
     """
     if n <= 0:
         return
+    table = _profile
+    if table is not None:
+        t0, c0 = time.perf_counter(), time.process_time()
     chunks = max(1, min(chunks, n))
     step = -(-n // chunks)
     threads = 1 if serial and not device.is_cuda else device.threads
@@ -165,6 +237,8 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
     finally:
         if pool is not None:
             pool.shutdown(wait=True)
+    if table is not None:
+        table.add(kernel_name(kernel), n, time.perf_counter() - t0, time.process_time() - c0)
 
 
 def free_memory(device: Device) -> Optional[int]:

@@ -56,7 +56,7 @@ import warp as wp
 
 from . import device as device_mod
 from .errors import BakeError
-from .formfactor import cluster_ff
+from .formfactor import cluster_ff, disk_ff
 from .hierarchy import Nodes
 from .rays import lift, visible
 from .surfels import Surfels, face_ff, fan_sample, pair_hits
@@ -269,6 +269,24 @@ def sided_ff(t: Nodes, s: Surfels, p: wp.vec3, n: wp.vec3, b: int, sides: int) -
 
 
 @wp.func
+def centre_ff(t: Nodes, s: Surfels, a: int, b: int, sides: int) -> float:
+    """Unoccluded form factor from node a's centre (with its normal) to node b, as ``sided_ff``,
+    except that from a cluster's centre a leaf is taken as its disk: that centre is no point of a
+    surface, where the leaf's exact triangles (``surfels.face_ff`` near a leaf) would be worth
+    their cost — several times the oracle's other work per pair (measured: 35 % of link creation
+    without rays on a 10 k-element room). What a link carries to a cluster's leaves is evaluated
+    at each leaf in the final gather (exactly, through ``centroid_ff``)."""
+    if t.descend[a] < 0 or t.descend[b] >= 0:
+        return sided_ff(t, s, t.position[a], t.normal[a], b, sides)
+    p = t.position[a]
+    n = t.normal[a]
+    f = disk_ff(p, n, t.position[b], t.normal[b], t.area[b])
+    if sides == 2:
+        f += disk_ff(p, n, t.position[b], -t.normal[b], t.area[b])
+    return f
+
+
+@wp.func
 def sided_element_ff(s: Surfels, p: wp.vec3, n: wp.vec3, e: int, sides: int) -> float:
     """``surfels.point_ff`` to the front of element e, plus its back when ``sides`` is 2."""
     f = face_ff(s, p, n, e, 1.0)
@@ -356,14 +374,19 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
         if visibility != 0:
             hit = element_ray(s, ea, eb, wp.randf(state), wp.randf(state), wp.randf(state))
         seen += hit
-        s_ab += _sample_terms(sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides) / s.area[eb],
-                              sm.glow[lb] / (da * db), hit)
-        s_ba += _sample_terms(sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides) / s.area[ea],
-                              sm.glow[la] / (da * db), hit)
+        f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
+        f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
+        s_ab += _sample_terms(f_ab / s.area[eb], sm.glow[lb] / (da * db), hit)
+        s_ba += _sample_terms(f_ba / s.area[ea], sm.glow[la] / (da * db), hit)
+        # the centroid form factors: a leaf's is the element form factor just evaluated
+        if lb != b:
+            f_ab = sided_ff(t, s, s.pos[ea], s.nrm[ea], b, sides)
+        if la != a:
+            f_ba = sided_ff(t, s, s.pos[eb], s.nrm[eb], a, sides)
         r_a += 1.0 / da
-        c_ab += sided_ff(t, s, s.pos[ea], s.nrm[ea], b, sides) / da
+        c_ab += f_ab / da
         r_b += 1.0 / db
-        c_ba += sided_ff(t, s, s.pos[eb], s.nrm[eb], a, sides) / db
+        c_ba += f_ba / db
     t_ab = s_ab[3] / float(rays)
     u_ab = s_ab[2]
     if s_ab[0] > 0.0:
@@ -496,8 +519,8 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
                             ray_count = rays
                         split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
                     else:
-                        f_ab = sided_ff(t, s, t.position[a], t.normal[a], b, sides)
-                        f_ba = sided_ff(t, s, t.position[b], t.normal[b], a, sides)
+                        f_ab = centre_ff(t, s, a, b, sides)
+                        f_ba = centre_ff(t, s, b, a, sides)
                         out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
                     if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
                         dec = LINK
@@ -697,14 +720,15 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
                            int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
                            out_count, link_count, values, seen, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
-        if oracle.visibility and oracle.rays > 0:
-            traced[0] += int(rays.numpy().sum(dtype=np.int64))
-        out_offset = wp.empty(q, dtype=wp.int32, device=d)
-        link_offset = wp.empty(q, dtype=wp.int32, device=d)
-        wp.utils.array_scan(out_count, out_offset, inclusive=False)
-        wp.utils.array_scan(link_count, link_offset, inclusive=False)
-        n_next = _int(out_offset, q - 1) + _int(out_count, q - 1)
-        n_links = _int(link_offset, q - 1) + _int(link_count, q - 1)
+        with device_mod.section("links.scan", dev):
+            if oracle.visibility and oracle.rays > 0:
+                traced[0] += int(rays.numpy().sum(dtype=np.int64))
+            out_offset = wp.empty(q, dtype=wp.int32, device=d)
+            link_offset = wp.empty(q, dtype=wp.int32, device=d)
+            wp.utils.array_scan(out_count, out_offset, inclusive=False)
+            wp.utils.array_scan(link_count, link_offset, inclusive=False)
+            n_next = _int(out_offset, q - 1) + _int(out_count, q - 1)
+            n_links = _int(link_offset, q - 1) + _int(link_count, q - 1)
         total += n_links
         if total * BYTES_PER_LINK + (q + n_next) * BYTES_PER_CANDIDATE > oracle.budget:
             return None
@@ -718,10 +742,11 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         qa, qb = next_a, next_b
     out = [wp.empty(total, dtype=dt, device=d) for dt in (wp.int32, wp.int32, wp.vec4, wp.vec2)]
     start = 0
-    for part in parts:
-        for dst, src in zip(out, part):
-            wp.copy(dst, src, dest_offset=start, count=src.size)
-        start += part[0].size
+    with device_mod.section("links.concatenate", dev):
+        for part in parts:
+            for dst, src in zip(out, part):
+                wp.copy(dst, src, dest_offset=start, count=src.size)
+            start += part[0].size
     return (*out, rounds)
 
 
@@ -764,7 +789,8 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     keys = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
     values = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
     device_mod.launch(_directed_kernel, pairs, [la, lb, keys, values], dev)
-    wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
+    with device_mod.section("links.sort", dev):
+        wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
     out = LinkSet()
     out.offsets = wp.zeros(n + 1, dtype=wp.int32, device=d)
     out.sender = wp.empty(max(count, 1), dtype=wp.int32, device=d)

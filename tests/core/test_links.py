@@ -178,3 +178,22 @@ def test_a_moved_scene_gets_its_links_made_again():
     fresh = hierarchical.solve(Problem(moved, CPU)).values
     assert np.sqrt(np.mean((refitted - fresh) ** 2)) < 0.05 * fresh.mean()
     assert abs(refitted.mean() / fresh.mean() - 1) < 0.02
+
+
+def test_a_profile_times_each_kernel_of_a_link_build_and_nothing_when_off():
+    """Inside ``device.profiling()`` every launch of a link build is counted under its kernel and
+    the scans and the sort under their sections; outside, nothing is collected."""
+    from radiosity_baker.core import device
+
+    problem = Problem(box_room(4), CPU)
+    problem.tree  # noqa: B018  (built before the profile)
+    with device.profiling() as table:
+        made = links.build(problem, links.Oracle(threshold=0.1))
+    rows = table.as_dict()
+    assert rows["links._oracle_kernel"]["calls"] == made.rounds
+    assert rows["links._scatter_kernel"]["calls"] == made.rounds
+    assert rows["links._csr_kernel"]["threads"] == made.count
+    assert {"links.scan", "links.sort"} <= set(rows)
+    assert all(r["seconds"] >= 0 and r["cpu_seconds"] >= 0 for r in rows.values())
+    links.build(problem, links.Oracle(threshold=0.1))
+    assert table.as_dict() == rows
