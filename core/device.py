@@ -107,7 +107,23 @@ def select(preference: str = "auto") -> Device:
                             "(needs an NVIDIA driver R580+ and a Turing or newer GPU); use --device cpu")
     if preference in ("cuda", "auto") and cuda:
         return Device("cuda:0", 1)
-    return Device("cpu", max(1, os.cpu_count() or 1), "no usable CUDA GPU found" if preference == "auto" else "")
+    return Device("cpu", cpu_threads(), "no usable CUDA GPU found" if preference == "auto" else "")
+
+
+# Environment variable: the CPU threads a launch is split over (default: every core). Workers of
+# a farm that share a machine each take their share of its cores (``core.farm``).
+THREADS_VARIABLE = "RADIOSITY_BAKER_THREADS"
+
+
+def cpu_threads() -> int:
+    """The CPU threads a launch is split over: ``THREADS_VARIABLE`` when set, else every core."""
+    given = os.environ.get(THREADS_VARIABLE, "").strip()
+    if given:
+        try:
+            return max(1, int(given))
+        except ValueError:
+            raise SettingsError(f"{THREADS_VARIABLE} must be a whole number of threads, not {given!r}") from None
+    return max(1, os.cpu_count() or 1)
 
 
 def load_kernels(device: Device, on_compile: Optional[Callable[[], None]] = None) -> int:

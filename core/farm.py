@@ -28,6 +28,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from . import device as device_mod
 from . import targets as target_registry
 from .errors import BakeCancelled, BakeError, SettingsError
 from .pipeline import BakeResult, Sequence, Solved, bake
@@ -76,9 +77,11 @@ class Farm:
         try:
             if address.startswith("local:"):
                 workers = int(address.partition(":")[2])
+                # the workers share this machine's cores: each splits its launches over its share
+                share = str(max(1, device_mod.cpu_threads() // workers))
                 self.cluster = distributed.LocalCluster(
                     n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                    dashboard_address=None, silence_logs=40)
+                    dashboard_address=None, silence_logs=40, env={device_mod.THREADS_VARIABLE: share})
                 self.client = distributed.Client(self.cluster, timeout=connect_timeout)
             else:
                 self.client = distributed.Client(address, timeout=connect_timeout)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake, farm
+from radiosity_baker.core import Settings, bake, device, farm
 from radiosity_baker.core.errors import SettingsError
 from radiosity_baker.core.lightmap import LightmapRequest
 from radiosity_baker.core.scene import LAMP_POINT
@@ -92,6 +92,8 @@ def test_lightmap_pages_baked_on_a_local_cluster_equal_a_bake_here_bit_for_bit(t
     with farm.Farm("local:2") as f:
         done = farm.bake_split(f, scene, settings, shapes.with_lightmap(request))
         report = done.counts["farm"]
+        shares = set(f.client.run(device.cpu_threads).values())  # the cores shared out
+    assert shares == {max(1, device.cpu_threads() // 2)}
     _same_pages(here["lightmap"], done["lightmap"])
     assert np.array_equal(here.output, done.output)  # vertices baked on the coordinator
     assert report["tasks"] == len(here["lightmap"].pages) and report["retried"] == []
@@ -155,3 +157,11 @@ def test_a_scheduler_that_cannot_be_reached_stops_the_bake_before_any_work():
 def test_a_scheduler_address_of_the_wrong_form_is_a_settings_error(address):
     with pytest.raises(SettingsError, match="scheduler"):
         Settings(scheduler=address).validate()
+
+
+def test_the_threads_a_launch_is_split_over_can_be_set_for_workers_sharing_a_machine(monkeypatch):
+    monkeypatch.setenv(device.THREADS_VARIABLE, "3")
+    assert device.cpu_threads() == 3 and device.select("cpu").threads == 3
+    monkeypatch.setenv(device.THREADS_VARIABLE, "many")
+    with pytest.raises(SettingsError, match="whole number of threads"):
+        device.cpu_threads()
