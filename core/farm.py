@@ -5,7 +5,7 @@ installed.
 - **Frames** (:meth:`Farm.submit_frame`): each frame is one task, ``pipeline.bake`` of the frame's
   extracted SceneData on a worker, cold (no warm start from the frame before: frames run apart).
 - **Pages** (:func:`bake_split`): the coordinator solves the frame once and lays out the pages
-  (unwrapping is global); the solved problem goes to the workers once (``scatter``) as a
+  (unwrapping is global); the solved problem goes to the workers once (``Farm.share``) as a
   :class:`Snapshot` of host arrays, and each page of every target that can be split (one with a
   ``split`` method: the lightmap) is a task — its raster, texel direct light, the solver's
   ``evaluate``, dilation — returning the page's arrays. A worker builds the problem of a snapshot
@@ -121,6 +121,16 @@ class Farm:
         gpu = {GPU: 1} if settings.device == "cuda" else None
         return self.client.submit(fn, *args, key=key, retries=RETRIES, resources=gpu, pure=False)
 
+    def share(self, value):
+        """A future holding ``value`` on every worker, sent once: the result of a task whose spec
+        holds it, made on one worker and copied to the others (so the scheduler can place the
+        tasks that need it anywhere). Unlike scattered data, a task's result lost with its workers
+        is made again, so the tasks that need it are retried instead of cancelled."""
+        future = self.client.submit(_held, value, key=f"shared-{uuid.uuid4().hex[:8]}", pure=False)
+        _distributed().wait([future])
+        self.client.replicate([future])
+        return future
+
     def submit_frame(self, scene: SceneData, settings: Settings, targets: list, frame: int):
         """A future of ``pipeline.bake(scene, settings, targets=targets)`` (a BakeResult): one
         frame of an animation, on a worker, from its extracted scene."""
@@ -163,7 +173,7 @@ class Farm:
 
 @dataclass
 class Snapshot:
-    """A solved frame as host arrays, sent to every worker once (scatter): ``key`` (unique per
+    """A solved frame as host arrays, sent to the workers once (``Farm.share``): ``key`` (unique per
     bake: a worker's cache key), the ``scene`` as given to the bake (not recentred) and its
     ``settings``; ``direct`` float32[n,3] direct lighting per element and ``values`` float32[n,3]
     the solution per element (irradiance/π); per split target name, what its parts need
@@ -218,12 +228,17 @@ def bake_part(snapshot: Snapshot, name: str, index: int) -> PartDone:
                     time.perf_counter() - t0, f"{os.uname().nodename}:{os.getpid()}")
 
 
+def _held(value):
+    """A task's result that is ``value`` itself (``Farm.share``)."""
+    return value
+
+
 def bake_split(farm: Farm, scene: SceneData, settings: Settings, targets: list,
                progress: Optional[Callable[[str, float], None]] = None, cancel=None,
                notify: Optional[Callable[[str], None]] = None) -> BakeResult:
     """Bake one frame into ``targets`` as ``pipeline.bake`` does, the parts of targets that can be
     split (``target.split(problem)`` → (layout, counts); ``target.join``) as tasks on ``farm``:
-    the solve runs here once, the snapshot is scattered once. The result's counts get ``farm``
+    the solve runs here once, the snapshot is sent to the workers once (``Farm.share``). The result's counts get ``farm``
     (scheduler, workers, tasks, retried tasks, per-task seconds) and its timings the tasks'
     stages summed over them (CPU seconds on the workers) and ``farm scatter`` / ``farm wait``
     (here)."""
@@ -235,7 +250,7 @@ def bake_split(farm: Farm, scene: SceneData, settings: Settings, targets: list,
     if split:
         t0 = time.perf_counter()
         snapshot = Snapshot(uuid.uuid4().hex, scene, settings, problem.direct, solved.solution.values, parts)
-        shared = farm.client.scatter(snapshot, broadcast=True)
+        shared = farm.share(snapshot)
         farm.timings["farm scatter"] = time.perf_counter() - t0
         futures = {name: [farm.submit(bake_part, shared, name, k, key=f"{name}-page-{k}", settings=settings)
                           for k in range(len(parts[name][1]))] for name in split}
