@@ -25,7 +25,8 @@ With ``--lightmap`` (issue #13) it compares lightmaps instead: see :func:`run_li
 Every bake is timed (wall clock, extraction included for ours, scene sync included for Cycles).
 The equal-error speedup is the time Cycles needs to reach our error — interpolated on its log
 error / log time curve, or extrapolated along its last segment when our error lies outside the
-measured range (marked) — divided by our time. Writes bench/results/accuracy-<machine>-<date>.json,
+measured range (marked) — divided by our time. Writes bench/results/accuracy-<machine>-<date>.json
+(accuracy-direct-… with ``--passes direct``),
 a PNG plot and the markdown tables README quotes (.md) beside it, and prints the tables.
 """
 from __future__ import annotations
@@ -473,7 +474,8 @@ def main(argv=None) -> int:
                                        args.passes, args.light_samples, args.light_selections)
                           for s in args.scenes}}
     results["load_at_end"] = round(__import__("os").getloadavg()[0], 2)
-    return _write(args.output / f"accuracy-{machine}-{stamp}", results, markdown, plot)
+    kind = "direct-" if args.passes == "direct" else ""
+    return _write(args.output / f"accuracy-{kind}{machine}-{stamp}", results, markdown, plot)
 
 
 def _write(base: Path, results: dict, tables, plotter) -> int:

@@ -241,8 +241,8 @@ def _sun_cosine(cos_t: float, half: float) -> float:
 
 @wp.func
 def _lamp_transfer(g: Emitters, l: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
-    """Unoccluded lighting of lamp l at p (normal n): inverse square for point and spot lamps (no
-    cone: it is applied per shadow sample), the sun's cone's projected solid angle, the exact form factor of an area
+    """Unoccluded lighting of lamp l at p (normal n): inverse square for point and spot lamps,
+    over d² + radius² (no cone: it is applied per shadow sample), the sun's cone's projected solid angle, the exact form factor of an area
     lamp's outline (one-sided)."""
     kind = g.lamp_kind[l]
     power = g.lamp_power[l]
@@ -272,8 +272,11 @@ def _lamp_transfer(g: Emitters, l: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
     cos_r = wp.dot(n, to) / wp.sqrt(d2)
     if cos_r <= 0.0:
         return wp.vec3(0.0)
-    # intensity P/4π W/sr → irradiance I·cos/d² → lighting = irradiance/π
-    return power * (cos_r / (4.0 * 3.141592653589793 * 3.141592653589793 * d2))
+    # intensity P/4π W/sr → irradiance I·cos/d² → lighting = irradiance/π; a lamp of radius r
+    # gives cos/(d² + r²) in Cycles, as a disk of radius r facing the receiver (measured through
+    # bpy: r/d = 1/6, 1/3, 1/2 give 1/(1 + r²/d²) of the point's light to four digits)
+    r = g.lamp_size[l][0]
+    return power * (cos_r / (4.0 * 3.141592653589793 * 3.141592653589793 * (d2 + r * r)))
 
 
 @wp.func

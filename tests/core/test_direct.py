@@ -32,6 +32,19 @@ def test_point_lamp_follows_inverse_square_and_cosine():
     np.testing.assert_allclose(lit, expect, rtol=1e-4)
 
 
+def test_a_point_lamp_of_radius_r_lights_as_cycles_over_d2_plus_r2():
+    """Cycles gives a sphere lamp's light as a disk of its radius facing the receiver would:
+    P·cosθ/(4π²(d² + r²)), 1/(1 + r²/d²) of the point's (measured through bpy, DESIGN.md Units)."""
+    p, n, t = receiver_plane()
+    for radius in (0.0, 0.1, 0.15):
+        lamp = shapes.lamp(LAMP_POINT, (0, 0, 0.3), size=(radius, radius), power=(60,) * 3)
+        lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)
+        v = np.array([0, 0, 0.3]) - receivers(p, n, t)
+        d2 = (v ** 2).sum(1)
+        expect = 60 * v[:, 2] / np.sqrt(d2) / (4 * np.pi ** 2 * (d2 + radius ** 2))
+        np.testing.assert_allclose(lit, np.repeat(expect[:, None], 3, 1), rtol=1e-4)
+
+
 def test_spot_lamp_is_a_point_lamp_inside_its_cone_and_dark_outside():
     p, n, t = shapes.grid(6.0, 12)
     cone = np.radians(60.0)
