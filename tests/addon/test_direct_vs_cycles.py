@@ -63,6 +63,8 @@ def _emissive_material(strength):
 # (0.4 m at z = 0.7), placed so the shadow and, for the spot, the cone's edge fall on the plane.
 CASES = {
     "point": lambda: _lamp("POINT", (0.3, 0.2, 2.0), energy=200.0, shadow_soft_size=0.05),
+    # a 10 cm lamp 30 cm over the plane: Cycles' P·cosθ/(4π²(d² + r²)), 10 % under a point's there
+    "point_near": lambda: _lamp("POINT", (0.5, -0.5, 0.3), energy=30.0, shadow_soft_size=0.1),
     "spot": lambda: _lamp("SPOT", (0.0, 0.0, 2.5), (12.0, 0.0, 0.0), energy=600.0,
                           shadow_soft_size=0.05, spot_size=math.radians(45.0), spot_blend=0.3),
     "sun": lambda: _lamp("SUN", (0.0, 0.0, 3.0), (25.0, 10.0, 0.0), energy=3.0,
