@@ -25,7 +25,7 @@ import warp as wp
 
 from . import device as device_mod
 from . import lighttree
-from .formfactor import outline_ff, tangent_frame, triangle_ff
+from .formfactor import outline_ff, plane_side, tangent_frame, triangle_ff
 from .rays import lift, lift_towards, visible
 from .scene import LAMP_AREA, LAMP_SPOT, LAMP_SUN, SceneData
 from .sh import moment_of
@@ -53,8 +53,10 @@ class Emitters:
 
     lamp_*: one entry per lamp (see ``core.scene.Lamps``; unit direction and axes, spot cones as
     the cosine of the half angle and the smoothstep width of the blend); em_v0, em_v1, em_v2:
-    vec3[E] corners of the emissive triangles with area, em_radiance: vec3[E]; tree: the
-    ``lighttree.LightTree`` over all of them.
+    vec3[E] corners of the emissive triangles with area, em_radiance: vec3[E]; em_side:
+    float32[E] where each lies on a closed surface of emissive triangles (``closed_sides``);
+    closed: the ``wp.Mesh`` id of those closed surfaces wound outward (winding numbers tell a
+    receiver inside them; 0 without any); tree: the ``lighttree.LightTree`` over all of them.
     """
 
     lamp_kind: wp.array(dtype=wp.int32)
@@ -71,12 +73,15 @@ class Emitters:
     em_v1: wp.array(dtype=wp.vec3)
     em_v2: wp.array(dtype=wp.vec3)
     em_radiance: wp.array(dtype=wp.vec3)
+    em_side: wp.array(dtype=wp.float32)
+    closed: wp.uint64
     tree: lighttree.LightTree
 
 
 class Lights:
     """The scene's lamps and emissive triangles on the device (``emitters``, the struct kernels
-    read) with the light tree over them; num_lamps, num_emitters (emissive triangles with area)."""
+    read) with the light tree over them and the mesh of the closed emissive surfaces
+    (``closed_mesh``, None without any); num_lamps, num_emitters (emissive triangles with area)."""
 
     def __init__(self, scene: SceneData, dev: device_mod.Device):
         d = dev.name
@@ -92,6 +97,17 @@ class Lights:
         g.em_v0, g.em_v1, g.em_v2 = (wp.array(np.ascontiguousarray(tri[:, k], np.float32), dtype=wp.vec3,
                                               device=d) for k in range(3))
         g.em_radiance = wp.array(radiance, dtype=wp.vec3, device=d)
+        side = closed_sides(tri)
+        g.em_side = wp.array(side, dtype=wp.float32, device=d)
+        # kept here: the struct holds only the mesh's id
+        self.closed_mesh = None
+        g.closed = 0
+        if (side != 0).any():
+            out = np.where((side < 0)[:, None, None], tri[:, [0, 2, 1]], tri)[side != 0]
+            self.closed_mesh = wp.Mesh(points=wp.array(out.reshape(-1, 3).astype(np.float32), dtype=wp.vec3, device=d),
+                                       indices=wp.array(np.arange(out.shape[0] * 3, dtype=np.int32), device=d),
+                                       support_winding_number=True)
+            g.closed = self.closed_mesh.id
         g.lamp_kind = wp.array(lamps.kind.astype(np.int32), dtype=wp.int32, device=d)
         g.lamp_pos = wp.array(lamps.position.astype(np.float32), dtype=wp.vec3, device=d)
         g.lamp_dir = wp.array(unit(lamps.direction), dtype=wp.vec3, device=d)
@@ -141,6 +157,45 @@ def _leaves(lamps, tri: np.ndarray, radiance: np.ndarray) -> lighttree.Leaves:
         power=np.concatenate([lamp_power,
                               radiance.astype(np.float64).sum(axis=1) * area / PI]).astype(np.float32),
         distant=np.concatenate([kind == LAMP_SUN, np.zeros(len(tri), bool)]))
+
+
+def closed_sides(tri: np.ndarray) -> np.ndarray:
+    """float32[E] for triangles with corners float64[E,3,3] (m): +1 where a triangle's winding
+    normal (b−a)×(c−a) points out of the closed, consistently wound surface it is part of (every
+    edge of that connected surface shared by exactly two of its triangles, wound opposite ways;
+    corners within 10⁻⁶ of the extent welded), −1 where it points in, 0 on an open surface."""
+    e = len(tri)
+    if e == 0:
+        return np.zeros(0, np.float32)
+    pts = tri.reshape(-1, 3)
+    grid = 1e-6 * max(float(np.ptp(pts, axis=0).max()), 1e-30)
+    _, vid = np.unique(np.round(pts / grid).astype(np.int64), axis=0, return_inverse=True)
+    v = vid.reshape(e, 3)
+    a, b = v.ravel(), v[:, [1, 2, 0]].ravel()
+    face = np.repeat(np.arange(e), 3)
+    code = np.minimum(a, b) * (int(vid.max()) + 1) + np.maximum(a, b)
+    codes, edge, count = np.unique(code, return_inverse=True, return_counts=True)
+    forward = np.bincount(edge, weights=(a < b), minlength=len(codes))
+    good_edge = (count == 2) & (forward == 1)
+    good = np.bincount(face, weights=good_edge[edge], minlength=e) == 3
+    # connected surfaces: faces joined by their shared edges, labels by min-propagation and jumps
+    order = np.argsort(edge, kind="stable")
+    shared = good_edge[edge[order]]
+    f1, f2 = face[order][shared][0::2], face[order][shared][1::2]
+    label = np.arange(e)
+    while True:
+        low = np.minimum(label[f1], label[f2])
+        new = label.copy()
+        np.minimum.at(new, f1, low)
+        np.minimum.at(new, f2, low)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    closed = ~np.isin(label, label[~good])
+    volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))
+    sign = np.sign(np.bincount(label, weights=volume, minlength=e))[label]
+    return np.where(closed, sign, 0.0).astype(np.float32)
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -393,15 +448,32 @@ def _leaf_transfer(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
     return _triangle_transfer(g, i, p, n)
 
 
+# The weight of an emissive triangle of a closed surface that shows a receiver outside the closed
+# surfaces its inner side, or a receiver inside them its outer side: the surface itself hides that
+# side from it (the inside decided once per receiver by the winding number of all closed emissive
+# surfaces together, so nested ones count as inside the outer). The weight only makes such samples
+# rarer, so the estimate stays unbiased where the guess is wrong.
+# Measured on the emissive room (exact weighing, 64 samples): 1, 1/16, 1/64, 1/256 give 5.3 %,
+# 2.2 %, 1.5 %, 1.2 % relative RMSE against Cycles; a receiver inside one closed emitter and
+# outside another pays for a smaller weight in noise.
+INNER_WEIGHT = wp.constant(1.0 / 64.0)
+
+
 @wp.func
-def _leaf_light(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3):
+def _leaf_light(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3, outside: float):
     """(unoccluded lighting vec3, weight, spot) of ``leaf`` at p: the weight, how likely it is
     chosen among its bucket, is the lighting's RGB sum (for a point-like spot times its cone, which
-    then decides alone whether it lights p); spot 1 for a spot lamp, whose cone the shadow applies."""
+    then decides alone whether it lights p; for a triangle of a closed emissive surface that shows
+    p the side it hides times INNER_WEIGHT: its inner side where ``outside`` is 1 (p outside the
+    closed surfaces), its outer side where it is −1 (p inside), neither where it is 0); spot 1 for
+    a spot lamp, whose cone the shadow applies."""
     t = _leaf_transfer(g, leaf, p, n)
     w = t[0] + t[1] + t[2]
     i = g.tree.leaf_index[leaf]
     spot = int(0)
+    if g.tree.leaf_kind[leaf] == lighttree.LEAF_TRIANGLE:
+        if w > 0.0 and outside * g.em_side[i] * plane_side(p, g.em_v0[i], g.em_v1[i], g.em_v2[i]) < 0.0:
+            w *= INNER_WEIGHT
     if g.tree.leaf_kind[leaf] == lighttree.LEAF_LAMP:
         if g.lamp_kind[i] == LAMP_SPOT:
             spot = 1
@@ -432,9 +504,21 @@ def _importance(g: Emitters, node: int, p: wp.vec3, n: wp.vec3) -> float:
         return lighttree.bound_importance(t, node, p, n)
     s = float(0.0)
     for j in range(t.first[node], t.first[node] + t.count[node]):
-        tj, w, sj = _leaf_light(g, j, p, n)
+        tj, w, sj = _leaf_light(g, j, p, n, 0.0)
         s += w
     return s
+
+
+@wp.func
+def _outside(g: Emitters, origin: wp.vec3, far: float) -> float:
+    """1 where ``origin`` lies outside every closed emissive surface (or there are none), −1 inside
+    one (its winding number), for ``_leaf_light``."""
+    if g.closed == wp.uint64(0):
+        return 1.0
+    q = wp.mesh_query_point_sign_winding_number(g.closed, origin, far)
+    if q.result and q.sign < 0.0:
+        return -1.0
+    return 1.0
 
 
 @wp.func
@@ -484,6 +568,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     if t.root < 0:
         return value, rays, lit, dark, 0.0, moment
     r = wp.float64(wp.randf(wp.rand_init(seed, -1)))
+    outside = _outside(g, origin, far)
     nodes = stack_int()
     los = stack_f64()
     his = stack_f64()
@@ -534,7 +619,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
         light_moment = wp.mat33(0.0)
         spots = int(0)
         for j in range(leaves):
-            tj, wj, sj = _leaf_light(g, first + j, p, n)
+            tj, wj, sj = _leaf_light(g, first + j, p, n, outside)
             if j < BUCKET:
                 weights[j] = wj
                 red[j] = tj[0]
@@ -564,7 +649,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
                 w = weights[j]
                 tj = wp.vec3(red[j], green[j], blue[j])
             else:
-                tj, w, sj = _leaf_light(g, first + j, p, n)
+                tj, w, sj = _leaf_light(g, first + j, p, n, outside)
             if w <= 0.0:
                 continue
             cum += w
