@@ -8,7 +8,10 @@ Each receiver traces ``light_samples`` shadow rays in all, however many emitters
 samples are stratified over [0,1) and a light tree (``core.lighttree``) over every lamp and
 emissive triangle shares them out by importance (each node's interval of [0,1) split among its
 children), down to buckets of a few emitters weighed by their exact unoccluded light; with few
-emitters (``light_selection`` auto) every emitter is weighed exactly. An emitter's samples are
+emitters (``light_selection`` auto) every emitter is weighed exactly. A triangle of a closed
+emissive surface that shows a receiver the side the surface hides from it (its inner side from
+outside, ``closed_sides`` and a winding number per receiver) is weighed INNER_WEIGHT of that.
+An emitter's samples are
 points of one scrambled (0,2)-sequence on it, its shadow the visible fraction weighted by the
 transfer kernel (so penumbrae stay unbiased where the kernel varies across the lamp), and it adds
 transfer × shadow × its share of the samples / its probability: unbiased in the choice of emitters,
@@ -549,7 +552,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     emitters, the shadow the kernel-weighted visible fraction as for a single lamp. ``shadows`` 0
     leaves shadows out (every sample visible, no rays). ``exact`` 1 weighs every emitter by its
     exact unoccluded lighting, as one bucket: each emitter's share of the samples is then its share
-    of the light. lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
+    of the light (hidden sides of closed emissive surfaces weighed less, ``_leaf_light``). lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
     estimate's standard error from the spread of its samples, relative to it (or to NOISE_FLOOR of
     its unshadowed light where it is darker than that); 0 unshadowed. moment: mat33, rows R, G, B
     of Σ (each emitter's lighting / cosθ) × its direction (``moment_of``): where the light comes
