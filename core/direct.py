@@ -539,7 +539,8 @@ def _rotation(seed: int, leaf: int) -> wp.vec2:
 
 @wp.func
 def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.vec3, count: int,
-              kb: int, ke: int, seed: int, shadows: int, exact: int, far: float):
+              kb: int, ke: int, seed: int, shadows: int, exact: int, far: float,
+              kept: wp.array2d(dtype=wp.float32), row: int):
     """Direct lighting at p (normal n, rays from ``origin``) from samples kb … ke−1 of ``count``
     stratified light samples: (vec3 lighting, rays, lit, dark, noise, moment).
 
@@ -552,7 +553,10 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     emitters, the shadow the kernel-weighted visible fraction as for a single lamp. ``shadows`` 0
     leaves shadows out (every sample visible, no rays). ``exact`` 1 weighs every emitter by its
     exact unoccluded lighting, as one bucket: each emitter's share of the samples is then its share
-    of the light (hidden sides of closed emissive surfaces weighed less, ``_leaf_light``). lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
+    of the light (hidden sides of closed emissive surfaces weighed less, ``_leaf_light``); with
+    ``row`` ≥ 0 the weights are kept in that row of ``kept`` (float32[receivers, leaves]) between
+    the pass that sums them and the one that shares the samples out, which then weighs again
+    only the emitters that get samples (else every emitter is weighed twice). lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
     estimate's standard error from the spread of its samples, relative to it (or to NOISE_FLOOR of
     its unshadowed light where it is darker than that); 0 unshadowed. moment: mat33, rows R, G, B
     of Σ (each emitter's lighting / cosθ) × its direction (``moment_of``): where the light comes
@@ -628,6 +632,8 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
                 red[j] = tj[0]
                 green[j] = tj[1]
                 blue[j] = tj[2]
+            elif row >= 0:
+                kept[row, first + j] = wj
             if wj > 0.0:
                 total += wj
                 light += tj
@@ -651,6 +657,8 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             if j < BUCKET:
                 w = weights[j]
                 tj = wp.vec3(red[j], green[j], blue[j])
+            elif row >= 0:
+                w = kept[row, first + j]
             else:
                 tj, w, sj = _leaf_light(g, first + j, p, n, outside)
             if w <= 0.0:
@@ -665,6 +673,8 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             e1 = wp.min(b, ke)
             if e0 < e1:
                 leaf = first + j
+                if j >= BUCKET and row >= 0:
+                    tj = _leaf_transfer(g, leaf, p, n)
                 i = t.leaf_index[leaf]
                 rot = _rotation(seed, leaf)
                 shadow = float(0.0)
@@ -728,12 +738,13 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
                    seed: int, first: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
                    rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
                    noise: wp.array(dtype=wp.float32), with_moments: int,
-                   moments: wp.array(dtype=wp.mat33)):
+                   moments: wp.array(dtype=wp.mat33), kept: wp.array2d(dtype=wp.float32)):
     """Per receiver by ``mode``: FULL ``count`` shadowed samples; UNSHADOWED the same without
     shadows; PROBE one sample, the receiver's own of its tile's stratified set (tile_index of
     tile_count, seeded per tile); SKIP nothing (0). Receiver i's jitter is seeded by first + i (its
     index in the whole set). flags: 1 lit, 2 dark, 3 both; noise: relative standard error;
-    moments (``with_moments`` 1): where the light comes from (see _estimate)."""
+    moments (``with_moments`` 1): where the light comes from (see _estimate); kept: float32[N,
+    leaves] scratch for ``exact`` weights (see _estimate), or [1, 1] to weigh twice."""
     i = wp.tid() + offset
     md = mode[i]
     if md == MODE_SKIP:
@@ -759,8 +770,11 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
     shadows = int(1)
     if md == MODE_UNSHADOWED:
         shadows = 0
+    row = int(-1)
+    if kept.shape[0] > 1:
+        row = i
     value, nr, lit, dark, err, moment = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows,
-                                                  exact, far)
+                                                  exact, far, kept, row)
     out[i] = value
     if with_moments != 0:
         moments[i] = moment
@@ -797,6 +811,10 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     if tiles is None:
         tiles = (np.zeros(1, np.int32),) * 3
     tile_arrays = [wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=d) for a in tiles]
+    exact = exact_selection(problem, n if whole is None else whole)
+    leaves = problem.lights.num_lamps + problem.lights.num_emitters
+    # exact weights kept per receiver while that stays within EXACT_WORK floats (else weighed twice)
+    kept = wp.empty((n, leaves) if exact and 1 < n * leaves <= EXACT_WORK else (1, 1), dtype=wp.float32, device=d)
     device_mod.launch(
         _direct_kernel, n,
         [problem.mesh.id, problem.lights.emitters,
@@ -804,8 +822,8 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
          wp.array(unit(normals), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
          wp.array(np.ascontiguousarray(mode, np.int32), dtype=wp.int32, device=d), int(count),
-         *tile_arrays, int(seed), int(first), int(exact_selection(problem, n if whole is None else whole)),
-         problem.far, out, rays, flags, noise, int(with_moments), moments],
+         *tile_arrays, int(seed), int(first), int(exact), problem.far, out, rays, flags, noise,
+         int(with_moments), moments, kept],
         dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
     result = (out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy(),
               noise.numpy())
