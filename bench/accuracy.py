@@ -4,6 +4,8 @@
                                        [--methods direct reference bunnell]
                                        [--samples 16 64 256 1024] [--reference-samples 4096]
                                        [--no-ao] [--device auto|cpu|cuda]
+                                       [--passes all|direct [--light-samples 64 128 256]
+                                        [--light-selections tree exact]]
 
 For each scene — the sample scenes, and built in code (``bench/emissive_scenes.py``) a closed
 flat-shaded emissive furnace and a room lit by a 2 304-triangle emissive sign — two quantities, each against Cycles bakes of the same vertices at each
@@ -11,6 +13,9 @@ sample count and at a high sample count taken as the truth:
 
 - lighting (DIFFUSE, Direct + Indirect, no Color) for each method of ours: relative RMSE, mean
   bias, 95th-percentile error (core.metrics.summary); the speedup is measured on relative RMSE;
+- with ``--passes direct`` (issue 20), direct light alone: Cycles' DIFFUSE Direct pass against our
+  ``direct`` method at each of ``--light-samples`` shadow rays per receiver and each of
+  ``--light-selections`` (no AO);
 - ambient occlusion (Cycles' AO bake, the world's AO distance) for ``--content ao``: mean absolute
   error, mean bias, 95th-percentile absolute error (core.metrics.scalar_summary); the speedup is
   measured on the mean absolute error.
@@ -20,7 +25,8 @@ With ``--lightmap`` (issue #13) it compares lightmaps instead: see :func:`run_li
 Every bake is timed (wall clock, extraction included for ours, scene sync included for Cycles).
 The equal-error speedup is the time Cycles needs to reach our error — interpolated on its log
 error / log time curve, or extrapolated along its last segment when our error lies outside the
-measured range (marked) — divided by our time. Writes bench/results/accuracy-<machine>-<date>.json,
+measured range (marked) — divided by our time. Writes bench/results/accuracy-<machine>-<date>.json
+(accuracy-direct-… with ``--passes direct``),
 a PNG plot and the markdown tables README quotes (.md) beside it, and prints the tables.
 """
 from __future__ import annotations
@@ -59,17 +65,22 @@ QUANTITIES = {
 }
 
 
-def cycles_series(names, samples, reference_samples, bake_type):
-    """({samples: (values, seconds)}, truth values) of Cycles ``bake_type`` bakes of ``names``."""
+# Cycles' DIFFUSE passes of each ``--passes`` choice.
+PASSES = {"all": ("DIRECT", "INDIRECT"), "direct": ("DIRECT",)}
+
+
+def cycles_series(names, samples, reference_samples, bake_type, passes=PASSES["all"]):
+    """({samples: (values, seconds)}, truth values) of Cycles ``bake_type`` bakes of ``names``
+    (DIFFUSE with ``passes``)."""
     series = {}
     for s in samples:
         t0 = time.perf_counter()
-        values = cycles_bake_vertex_colors(names, bake_type=bake_type, samples=s, seed=s)
+        values = cycles_bake_vertex_colors(names, bake_type=bake_type, passes=passes, samples=s, seed=s)
         series[s] = (stack(values, names), time.perf_counter() - t0)
         print(f"  cycles {bake_type} {s:5d} samples: {series[s][1]:7.2f} s", flush=True)
     t0 = time.perf_counter()
-    truth = stack(cycles_bake_vertex_colors(names, bake_type=bake_type, samples=reference_samples, seed=7),
-                  names)
+    truth = stack(cycles_bake_vertex_colors(names, bake_type=bake_type, passes=passes,
+                                            samples=reference_samples, seed=7), names)
     print(f"  cycles {bake_type} {reference_samples:5d} samples (truth): {time.perf_counter() - t0:7.2f} s",
           flush=True)
     return series, truth
@@ -92,11 +103,11 @@ def equal_error_seconds(errors, seconds, target):
     return float(np.exp(lt[i[0]] + slope * (x - le[i[0]]))), True
 
 
-def run_quantity(names, quantity, runs, samples, reference_samples):
-    """Cycles' error/time curve for ``quantity`` and each of our ``runs`` ({label: Settings})
-    placed on it: {"cycles": [rows], "ours": [rows]}."""
+def run_quantity(names, quantity, runs, samples, reference_samples, passes=PASSES["all"]):
+    """Cycles' error/time curve for ``quantity`` (lighting: of the DIFFUSE ``passes``) and each of
+    our ``runs`` ({label: Settings}) placed on it: {"cycles": [rows], "ours": [rows]}."""
     q = QUANTITIES[quantity]
-    series, truth = cycles_series(names, samples, reference_samples, q["bake_type"])
+    series, truth = cycles_series(names, samples, reference_samples, q["bake_type"], passes)
     cycles = [{"samples": s, "seconds": round(t, 3), **q["summary"](v, truth)} for s, (v, t) in series.items()]
     ours = []
     for label, settings in runs.items():
@@ -117,8 +128,16 @@ def run_quantity(names, quantity, runs, samples, reference_samples):
             "cycles": cycles, "ours": ours}
 
 
-def run_scene(scene_name, methods, samples, reference_samples, device, with_ao):
-    """One sample scene (``sample_blends``) or scene built in code (``emissive_scenes.SCENES``)."""
+def direct_runs(light_samples, selections, device) -> dict:
+    """{label: Settings} of the ``direct`` method at each light sample count and selection."""
+    return {f"direct {sel} {n}": Settings(method="direct", light_selection=sel, light_samples=n, device=device)
+            for sel in selections for n in light_samples}
+
+
+def run_scene(scene_name, methods, samples, reference_samples, device, with_ao, passes="all",
+              light_samples=(64,), selections=("auto",)):
+    """One sample scene (``sample_blends``) or scene built in code (``emissive_scenes.SCENES``);
+    ``passes`` direct compares direct light alone (``direct_runs``, no AO)."""
     if scene_name in emissive_scenes.SCENES:
         emissive_scenes.SCENES[scene_name]()
     else:
@@ -127,10 +146,11 @@ def run_scene(scene_name, methods, samples, reference_samples, device, with_ao):
     names = receivers(scene)
     print(f"{scene_name}: {', '.join(names)}", flush=True)
     out = {"receivers": names, "vertices": int(sum(len(scene.objects[n].data.vertices) for n in names)),
-           "reference_samples": reference_samples,
-           "lighting": run_quantity(names, "lighting", {m: Settings(method=m, device=device) for m in methods},
-                                    samples, reference_samples)}
-    if with_ao:
+           "reference_samples": reference_samples, "passes": passes}
+    runs = (direct_runs(light_samples, selections, device) if passes == "direct"
+            else {m: Settings(method=m, device=device) for m in methods})
+    out["lighting"] = run_quantity(names, "lighting", runs, samples, reference_samples, PASSES[passes])
+    if with_ao and passes == "all":
         out["ao_distance"] = float(scene.world.light_settings.distance)
         out["ao"] = run_quantity(names, "ao", {"ao": Settings(content="ao", device=device)}, samples,
                                  reference_samples)
@@ -416,6 +436,12 @@ def main(argv=None) -> int:
     parser.add_argument("--reference-samples", type=int, default=4096)
     parser.add_argument("--no-ao", dest="ao", action="store_false", help="leave out AO against Cycles' AO bake")
     parser.add_argument("--device", default="auto", choices=core_settings.DEVICES)
+    parser.add_argument("--passes", default="all", choices=sorted(PASSES),
+                        help="direct: Cycles' Direct pass against our direct light alone (no AO)")
+    parser.add_argument("--light-samples", nargs="+", type=int, default=[64],
+                        help="with --passes direct: shadow rays per receiver of each run")
+    parser.add_argument("--light-selections", nargs="+", default=["auto"], choices=core_settings.LIGHT_SELECTIONS,
+                        help="with --passes direct: emitter selection of each run")
     parser.add_argument("--output", type=Path, default=ROOT / "bench" / "results")
     parser.add_argument("--lightmap", action="store_true",
                         help="compare lightmaps with Cycles' image bake instead")
@@ -443,9 +469,13 @@ def main(argv=None) -> int:
                       lightmap_plot)
     results = {"machine": machine, "date": stamp, "platform": platform.platform(),
                "cpu_count": __import__("os").cpu_count(), "blender": bpy.app.version_string,
-               "scenes": {s: run_scene(s, args.methods, args.samples, args.reference_samples, args.device, args.ao)
+               "load_at_start": round(__import__("os").getloadavg()[0], 2),
+               "scenes": {s: run_scene(s, args.methods, args.samples, args.reference_samples, args.device, args.ao,
+                                       args.passes, args.light_samples, args.light_selections)
                           for s in args.scenes}}
-    return _write(args.output / f"accuracy-{machine}-{stamp}", results, markdown, plot)
+    results["load_at_end"] = round(__import__("os").getloadavg()[0], 2)
+    kind = "direct-" if args.passes == "direct" else ""
+    return _write(args.output / f"accuracy-{kind}{machine}-{stamp}", results, markdown, plot)
 
 
 def _write(base: Path, results: dict, tables, plotter) -> int:

@@ -8,7 +8,10 @@ Each receiver traces ``light_samples`` shadow rays in all, however many emitters
 samples are stratified over [0,1) and a light tree (``core.lighttree``) over every lamp and
 emissive triangle shares them out by importance (each node's interval of [0,1) split among its
 children), down to buckets of a few emitters weighed by their exact unoccluded light; with few
-emitters (``light_selection`` auto) every emitter is weighed exactly. An emitter's samples are
+emitters (``light_selection`` auto) every emitter is weighed exactly. A triangle of a closed
+emissive surface that shows a receiver the side the surface hides from it (its inner side from
+outside, ``closed_sides`` and a winding number per receiver) is weighed INNER_WEIGHT of that.
+An emitter's samples are
 points of one scrambled (0,2)-sequence on it, its shadow the visible fraction weighted by the
 transfer kernel (so penumbrae stay unbiased where the kernel varies across the lamp), and it adds
 transfer × shadow × its share of the samples / its probability: unbiased in the choice of emitters,
@@ -25,7 +28,7 @@ import warp as wp
 
 from . import device as device_mod
 from . import lighttree
-from .formfactor import outline_ff, tangent_frame, triangle_ff
+from .formfactor import outline_ff, plane_side, tangent_frame, triangle_ff
 from .rays import lift, lift_towards, visible
 from .scene import LAMP_AREA, LAMP_SPOT, LAMP_SUN, SceneData
 from .sh import moment_of
@@ -53,8 +56,10 @@ class Emitters:
 
     lamp_*: one entry per lamp (see ``core.scene.Lamps``; unit direction and axes, spot cones as
     the cosine of the half angle and the smoothstep width of the blend); em_v0, em_v1, em_v2:
-    vec3[E] corners of the emissive triangles with area, em_radiance: vec3[E]; tree: the
-    ``lighttree.LightTree`` over all of them.
+    vec3[E] corners of the emissive triangles with area, em_radiance: vec3[E]; em_side:
+    float32[E] where each lies on a closed surface of emissive triangles (``closed_sides``);
+    closed: the ``wp.Mesh`` id of those closed surfaces wound outward (winding numbers tell a
+    receiver inside them; 0 without any); tree: the ``lighttree.LightTree`` over all of them.
     """
 
     lamp_kind: wp.array(dtype=wp.int32)
@@ -71,12 +76,15 @@ class Emitters:
     em_v1: wp.array(dtype=wp.vec3)
     em_v2: wp.array(dtype=wp.vec3)
     em_radiance: wp.array(dtype=wp.vec3)
+    em_side: wp.array(dtype=wp.float32)
+    closed: wp.uint64
     tree: lighttree.LightTree
 
 
 class Lights:
     """The scene's lamps and emissive triangles on the device (``emitters``, the struct kernels
-    read) with the light tree over them; num_lamps, num_emitters (emissive triangles with area)."""
+    read) with the light tree over them and the mesh of the closed emissive surfaces
+    (``closed_mesh``, None without any); num_lamps, num_emitters (emissive triangles with area)."""
 
     def __init__(self, scene: SceneData, dev: device_mod.Device):
         d = dev.name
@@ -92,6 +100,17 @@ class Lights:
         g.em_v0, g.em_v1, g.em_v2 = (wp.array(np.ascontiguousarray(tri[:, k], np.float32), dtype=wp.vec3,
                                               device=d) for k in range(3))
         g.em_radiance = wp.array(radiance, dtype=wp.vec3, device=d)
+        side = closed_sides(tri)
+        g.em_side = wp.array(side, dtype=wp.float32, device=d)
+        # kept here: the struct holds only the mesh's id
+        self.closed_mesh = None
+        g.closed = 0
+        if (side != 0).any():
+            out = np.where((side < 0)[:, None, None], tri[:, [0, 2, 1]], tri)[side != 0]
+            self.closed_mesh = wp.Mesh(points=wp.array(out.reshape(-1, 3).astype(np.float32), dtype=wp.vec3, device=d),
+                                       indices=wp.array(np.arange(out.shape[0] * 3, dtype=np.int32), device=d),
+                                       support_winding_number=True)
+            g.closed = self.closed_mesh.id
         g.lamp_kind = wp.array(lamps.kind.astype(np.int32), dtype=wp.int32, device=d)
         g.lamp_pos = wp.array(lamps.position.astype(np.float32), dtype=wp.vec3, device=d)
         g.lamp_dir = wp.array(unit(lamps.direction), dtype=wp.vec3, device=d)
@@ -141,6 +160,45 @@ def _leaves(lamps, tri: np.ndarray, radiance: np.ndarray) -> lighttree.Leaves:
         power=np.concatenate([lamp_power,
                               radiance.astype(np.float64).sum(axis=1) * area / PI]).astype(np.float32),
         distant=np.concatenate([kind == LAMP_SUN, np.zeros(len(tri), bool)]))
+
+
+def closed_sides(tri: np.ndarray) -> np.ndarray:
+    """float32[E] for triangles with corners float64[E,3,3] (m): +1 where a triangle's winding
+    normal (b−a)×(c−a) points out of the closed, consistently wound surface it is part of (every
+    edge of that connected surface shared by exactly two of its triangles, wound opposite ways;
+    corners within 10⁻⁶ of the extent welded), −1 where it points in, 0 on an open surface."""
+    e = len(tri)
+    if e == 0:
+        return np.zeros(0, np.float32)
+    pts = tri.reshape(-1, 3)
+    grid = 1e-6 * max(float(np.ptp(pts, axis=0).max()), 1e-30)
+    _, vid = np.unique(np.round(pts / grid).astype(np.int64), axis=0, return_inverse=True)
+    v = vid.reshape(e, 3)
+    a, b = v.ravel(), v[:, [1, 2, 0]].ravel()
+    face = np.repeat(np.arange(e), 3)
+    code = np.minimum(a, b) * (int(vid.max()) + 1) + np.maximum(a, b)
+    codes, edge, count = np.unique(code, return_inverse=True, return_counts=True)
+    forward = np.bincount(edge, weights=(a < b), minlength=len(codes))
+    good_edge = (count == 2) & (forward == 1)
+    good = np.bincount(face, weights=good_edge[edge], minlength=e) == 3
+    # connected surfaces: faces joined by their shared edges, labels by min-propagation and jumps
+    order = np.argsort(edge, kind="stable")
+    shared = good_edge[edge[order]]
+    f1, f2 = face[order][shared][0::2], face[order][shared][1::2]
+    label = np.arange(e)
+    while True:
+        low = np.minimum(label[f1], label[f2])
+        new = label.copy()
+        np.minimum.at(new, f1, low)
+        np.minimum.at(new, f2, low)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    closed = ~np.isin(label, label[~good])
+    volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))
+    sign = np.sign(np.bincount(label, weights=volume, minlength=e))[label]
+    return np.where(closed, sign, 0.0).astype(np.float32)
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -241,8 +299,8 @@ def _sun_cosine(cos_t: float, half: float) -> float:
 
 @wp.func
 def _lamp_transfer(g: Emitters, l: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
-    """Unoccluded lighting of lamp l at p (normal n): inverse square for point and spot lamps (no
-    cone: it is applied per shadow sample), the sun's cone's projected solid angle, the exact form factor of an area
+    """Unoccluded lighting of lamp l at p (normal n): inverse square for point and spot lamps,
+    over d² + radius² (no cone: it is applied per shadow sample), the sun's cone's projected solid angle, the exact form factor of an area
     lamp's outline (one-sided)."""
     kind = g.lamp_kind[l]
     power = g.lamp_power[l]
@@ -272,8 +330,11 @@ def _lamp_transfer(g: Emitters, l: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
     cos_r = wp.dot(n, to) / wp.sqrt(d2)
     if cos_r <= 0.0:
         return wp.vec3(0.0)
-    # intensity P/4π W/sr → irradiance I·cos/d² → lighting = irradiance/π
-    return power * (cos_r / (4.0 * 3.141592653589793 * 3.141592653589793 * d2))
+    # intensity P/4π W/sr → irradiance I·cos/d² → lighting = irradiance/π; a lamp of radius r
+    # gives cos/(d² + r²) in Cycles, as a disk of radius r facing the receiver (measured through
+    # bpy: r/d = 1/6, 1/3, 1/2 give 1/(1 + r²/d²) of the point's light to four digits)
+    r = g.lamp_size[l][0]
+    return power * (cos_r / (4.0 * 3.141592653589793 * 3.141592653589793 * (d2 + r * r)))
 
 
 @wp.func
@@ -390,15 +451,32 @@ def _leaf_transfer(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
     return _triangle_transfer(g, i, p, n)
 
 
+# The weight of an emissive triangle of a closed surface that shows a receiver outside the closed
+# surfaces its inner side, or a receiver inside them its outer side: the surface itself hides that
+# side from it (the inside decided once per receiver by the winding number of all closed emissive
+# surfaces together, so nested ones count as inside the outer). The weight only makes such samples
+# rarer, so the estimate stays unbiased where the guess is wrong.
+# Measured on the emissive room (exact weighing, 64 samples): 1, 1/16, 1/64, 1/256 give 5.3 %,
+# 2.2 %, 1.5 %, 1.2 % relative RMSE against Cycles; a receiver inside one closed emitter and
+# outside another pays for a smaller weight in noise.
+INNER_WEIGHT = wp.constant(1.0 / 64.0)
+
+
 @wp.func
-def _leaf_light(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3):
+def _leaf_light(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3, outside: float):
     """(unoccluded lighting vec3, weight, spot) of ``leaf`` at p: the weight, how likely it is
     chosen among its bucket, is the lighting's RGB sum (for a point-like spot times its cone, which
-    then decides alone whether it lights p); spot 1 for a spot lamp, whose cone the shadow applies."""
+    then decides alone whether it lights p; for a triangle of a closed emissive surface that shows
+    p the side it hides times INNER_WEIGHT: its inner side where ``outside`` is 1 (p outside the
+    closed surfaces), its outer side where it is −1 (p inside), neither where it is 0); spot 1 for
+    a spot lamp, whose cone the shadow applies."""
     t = _leaf_transfer(g, leaf, p, n)
     w = t[0] + t[1] + t[2]
     i = g.tree.leaf_index[leaf]
     spot = int(0)
+    if g.tree.leaf_kind[leaf] == lighttree.LEAF_TRIANGLE:
+        if w > 0.0 and outside * g.em_side[i] * plane_side(p, g.em_v0[i], g.em_v1[i], g.em_v2[i]) < 0.0:
+            w *= INNER_WEIGHT
     if g.tree.leaf_kind[leaf] == lighttree.LEAF_LAMP:
         if g.lamp_kind[i] == LAMP_SPOT:
             spot = 1
@@ -429,9 +507,21 @@ def _importance(g: Emitters, node: int, p: wp.vec3, n: wp.vec3) -> float:
         return lighttree.bound_importance(t, node, p, n)
     s = float(0.0)
     for j in range(t.first[node], t.first[node] + t.count[node]):
-        tj, w, sj = _leaf_light(g, j, p, n)
+        tj, w, sj = _leaf_light(g, j, p, n, 0.0)
         s += w
     return s
+
+
+@wp.func
+def _outside(g: Emitters, origin: wp.vec3, far: float) -> float:
+    """1 where ``origin`` lies outside every closed emissive surface (or there are none), −1 inside
+    one (its winding number), for ``_leaf_light``."""
+    if g.closed == wp.uint64(0):
+        return 1.0
+    q = wp.mesh_query_point_sign_winding_number(g.closed, origin, far)
+    if q.result and q.sign < 0.0:
+        return -1.0
+    return 1.0
 
 
 @wp.func
@@ -449,7 +539,8 @@ def _rotation(seed: int, leaf: int) -> wp.vec2:
 
 @wp.func
 def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.vec3, count: int,
-              kb: int, ke: int, seed: int, shadows: int, exact: int, far: float):
+              kb: int, ke: int, seed: int, shadows: int, exact: int, far: float,
+              kept: wp.array2d(dtype=wp.float32), row: int):
     """Direct lighting at p (normal n, rays from ``origin``) from samples kb … ke−1 of ``count``
     stratified light samples: (vec3 lighting, rays, lit, dark, noise, moment).
 
@@ -462,7 +553,10 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     emitters, the shadow the kernel-weighted visible fraction as for a single lamp. ``shadows`` 0
     leaves shadows out (every sample visible, no rays). ``exact`` 1 weighs every emitter by its
     exact unoccluded lighting, as one bucket: each emitter's share of the samples is then its share
-    of the light. lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
+    of the light (hidden sides of closed emissive surfaces weighed less, ``_leaf_light``); with
+    ``row`` ≥ 0 the weights are kept in that row of ``kept`` (float32[receivers, leaves]) between
+    the pass that sums them and the one that shares the samples out, which then weighs again
+    only the emitters that get samples (else every emitter is weighed twice). lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
     estimate's standard error from the spread of its samples, relative to it (or to NOISE_FLOOR of
     its unshadowed light where it is darker than that); 0 unshadowed. moment: mat33, rows R, G, B
     of Σ (each emitter's lighting / cosθ) × its direction (``moment_of``): where the light comes
@@ -481,6 +575,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     if t.root < 0:
         return value, rays, lit, dark, 0.0, moment
     r = wp.float64(wp.randf(wp.rand_init(seed, -1)))
+    outside = _outside(g, origin, far)
     nodes = stack_int()
     los = stack_f64()
     his = stack_f64()
@@ -531,12 +626,14 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
         light_moment = wp.mat33(0.0)
         spots = int(0)
         for j in range(leaves):
-            tj, wj, sj = _leaf_light(g, first + j, p, n)
+            tj, wj, sj = _leaf_light(g, first + j, p, n, outside)
             if j < BUCKET:
                 weights[j] = wj
                 red[j] = tj[0]
                 green[j] = tj[1]
                 blue[j] = tj[2]
+            elif row >= 0:
+                kept[row, first + j] = wj
             if wj > 0.0:
                 total += wj
                 light += tj
@@ -560,8 +657,10 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             if j < BUCKET:
                 w = weights[j]
                 tj = wp.vec3(red[j], green[j], blue[j])
+            elif row >= 0:
+                w = kept[row, first + j]
             else:
-                tj, w, sj = _leaf_light(g, first + j, p, n)
+                tj, w, sj = _leaf_light(g, first + j, p, n, outside)
             if w <= 0.0:
                 continue
             cum += w
@@ -574,6 +673,8 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             e1 = wp.min(b, ke)
             if e0 < e1:
                 leaf = first + j
+                if j >= BUCKET and row >= 0:
+                    tj = _leaf_transfer(g, leaf, p, n)
                 i = t.leaf_index[leaf]
                 rot = _rotation(seed, leaf)
                 shadow = float(0.0)
@@ -637,12 +738,13 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
                    seed: int, first: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
                    rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
                    noise: wp.array(dtype=wp.float32), with_moments: int,
-                   moments: wp.array(dtype=wp.mat33)):
+                   moments: wp.array(dtype=wp.mat33), kept: wp.array2d(dtype=wp.float32)):
     """Per receiver by ``mode``: FULL ``count`` shadowed samples; UNSHADOWED the same without
     shadows; PROBE one sample, the receiver's own of its tile's stratified set (tile_index of
     tile_count, seeded per tile); SKIP nothing (0). Receiver i's jitter is seeded by first + i (its
     index in the whole set). flags: 1 lit, 2 dark, 3 both; noise: relative standard error;
-    moments (``with_moments`` 1): where the light comes from (see _estimate)."""
+    moments (``with_moments`` 1): where the light comes from (see _estimate); kept: float32[N,
+    leaves] scratch for ``exact`` weights (see _estimate), or [1, 1] to weigh twice."""
     i = wp.tid() + offset
     md = mode[i]
     if md == MODE_SKIP:
@@ -668,8 +770,11 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
     shadows = int(1)
     if md == MODE_UNSHADOWED:
         shadows = 0
+    row = int(-1)
+    if kept.shape[0] > 1:
+        row = i
     value, nr, lit, dark, err, moment = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows,
-                                                  exact, far)
+                                                  exact, far, kept, row)
     out[i] = value
     if with_moments != 0:
         moments[i] = moment
@@ -706,6 +811,10 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     if tiles is None:
         tiles = (np.zeros(1, np.int32),) * 3
     tile_arrays = [wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=d) for a in tiles]
+    exact = exact_selection(problem, n if whole is None else whole)
+    leaves = problem.lights.num_lamps + problem.lights.num_emitters
+    # exact weights kept per receiver while that stays within EXACT_WORK floats (else weighed twice)
+    kept = wp.empty((n, leaves) if exact and 1 < n * leaves <= EXACT_WORK else (1, 1), dtype=wp.float32, device=d)
     device_mod.launch(
         _direct_kernel, n,
         [problem.mesh.id, problem.lights.emitters,
@@ -713,8 +822,8 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
          wp.array(unit(normals), dtype=wp.vec3, device=d),
          wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
          wp.array(np.ascontiguousarray(mode, np.int32), dtype=wp.int32, device=d), int(count),
-         *tile_arrays, int(seed), int(first), int(exact_selection(problem, n if whole is None else whole)),
-         problem.far, out, rays, flags, noise, int(with_moments), moments],
+         *tile_arrays, int(seed), int(first), int(exact), problem.far, out, rays, flags, noise,
+         int(with_moments), moments, kept],
         dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
     result = (out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy(),
               noise.numpy())

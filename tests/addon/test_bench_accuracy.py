@@ -69,3 +69,21 @@ def test_accuracy_bench_lightmap_mode_places_our_page_on_cycles_curves(tmp_path)
             assert row["speedup_vs_cycles_oidn"] > 0 and "denoised_relative_rmse" in row["cycles"][0]
     assert "**ours**" in json_path.with_suffix(".md").read_text()
     assert json_path.with_suffix(".png").stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_accuracy_bench_direct_mode_places_each_light_sample_count_on_cycles_direct_curve(tmp_path):
+    """--passes direct: Cycles' Direct pass as the truth, our direct light at each sample count and
+    emitter selection, no AO; the file says which passes it compared."""
+    accuracy = script("bench/accuracy.py")
+    assert accuracy.main(["--scenes", "lamp_scene", "--passes", "direct", "--light-samples", "4", "32",
+                          "--light-selections", "exact", "--samples", "4", "16", "--reference-samples", "64",
+                          "--device", "cpu", "--output", str(tmp_path)]) == 0
+    (json_path,) = tmp_path.glob("accuracy-direct-*.json")
+    scene = json.loads(json_path.read_text())["scenes"]["lamp_scene"]
+    assert scene["passes"] == "direct" and "ao" not in scene
+    ours = {o["method"]: o for o in scene["lighting"]["ours"]}
+    assert set(ours) == {"direct exact 4", "direct exact 32"}
+    # direct light alone against a direct-only truth: no missing indirect part, more samples closer
+    assert abs(ours["direct exact 32"]["mean_bias"]) < 0.05
+    assert ours["direct exact 32"]["relative_rmse"] < ours["direct exact 4"]["relative_rmse"]

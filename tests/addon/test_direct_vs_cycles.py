@@ -63,6 +63,8 @@ def _emissive_material(strength):
 # (0.4 m at z = 0.7), placed so the shadow and, for the spot, the cone's edge fall on the plane.
 CASES = {
     "point": lambda: _lamp("POINT", (0.3, 0.2, 2.0), energy=200.0, shadow_soft_size=0.05),
+    # a 10 cm lamp 30 cm over the plane: Cycles' P·cosθ/(4π²(d² + r²)), 10 % under a point's there
+    "point_near": lambda: _lamp("POINT", (0.5, -0.5, 0.3), energy=30.0, shadow_soft_size=0.1),
     "spot": lambda: _lamp("SPOT", (0.0, 0.0, 2.5), (12.0, 0.0, 0.0), energy=600.0,
                           shadow_soft_size=0.05, spot_size=math.radians(45.0), spot_blend=0.3),
     "sun": lambda: _lamp("SUN", (0.0, 0.0, 3.0), (25.0, 10.0, 0.0), energy=3.0,
@@ -201,3 +203,69 @@ def test_sun_of_any_angle_matches_cycles(empty_scene, degrees):
                                      "cycles_samples": CYCLES_SAMPLES,
                                      "light_samples": SUN_LIGHT_SAMPLES})
     assert rmse <= TOLERANCE, f"sun {degrees:g}°: relative RMSE {rmse:.4f} > {TOLERANCE}"
+
+
+# Emitters touching their receivers (issue 20): a 20 cm emissive square 1 mm in front of a wall, an
+# emissive 24-sided tube (r = 5 cm) lying on a floor on one of its edges, 1 mm above it. The
+# receiver is a 0.6 m grid of 2.5 cm cells (625 vertices); compared are its vertices within
+# CONTACT_REACH of the emitter's footprint on it (those behind the panel or under the tube, lit
+# through the 1 mm gap, and those around it, lit at grazing angles), as relative RMSE over them
+# and the worst vertex's error relative to their mean.
+CONTACT_CUTS = 24
+CONTACT_SIZE = 0.6
+CONTACT_REACH = 0.1
+CONTACT_CYCLES_SAMPLES = 4096
+GAP = 0.001
+
+
+def _contact_figures(case: str, receiver: str, near: np.ndarray, **settings) -> float:
+    """Bake ``receiver`` both ways; record and return the relative RMSE over the vertices ``near``."""
+    reference = cycles_bake_vertex_colors([receiver], passes=("DIRECT",),
+                                          samples=CONTACT_CYCLES_SAMPLES)[receiver]
+    ours = _our_direct(receiver, **settings)
+    rmse = metrics.relative_rmse(ours[near], reference[near])
+    mean = float(np.linalg.norm(reference[near], axis=1).mean())
+    worst = float(np.linalg.norm(ours[near] - reference[near], axis=1).max() / mean)
+    everywhere = metrics.relative_rmse(ours, reference)
+    print(f"\n{case}: {int(near.sum())} vertices near the contact: relative RMSE {rmse:.4f}, worst "
+          f"vertex {worst:.4f} of their mean {mean:.3f}; all {len(ours)} vertices {everywhere:.4f}")
+    _record(case, {"relative_rmse_near_contact": round(rmse, 5), "worst_vertex_near_contact": round(worst, 5),
+                   "relative_rmse_all": round(everywhere, 5), "vertices_near_contact": int(near.sum()),
+                   "mean_near_contact": round(mean, 5), "cycles_samples": CONTACT_CYCLES_SAMPLES,
+                   "light_samples": settings.get("light_samples", LIGHT_SAMPLES)})
+    assert reference[near].mean() > 0.1
+    return rmse
+
+
+def _positions(ob) -> np.ndarray:
+    """float64[V,3] world positions of ``ob``'s vertices."""
+    co = np.empty(len(ob.data.vertices) * 3, np.float64)
+    ob.data.vertices.foreach_get("co", co)
+    m = np.array(ob.matrix_world)
+    return co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+
+
+@pytest.mark.slow
+def test_emissive_panel_flush_with_a_wall_matches_cycles_at_the_contact(empty_scene):
+    """The wall faces −y; the panel's x edges fall between vertex columns, its z edges on rows."""
+    wall = _mesh("Wall", rotation=(0.5 * math.pi, 0.0, 0.0), cuts=CONTACT_CUTS, size=CONTACT_SIZE)
+    half, centre = 0.1, np.array([0.00625, -GAP, 0.0])
+    _mesh("Panel", tuple(centre), (0.5 * math.pi, 0.0, 0.0), size=2 * half, material=_emissive_material(10.0))
+    bpy.context.view_layer.update()
+    offset = np.abs(_positions(wall) - centre)[:, [0, 2]]
+    near = (offset <= half + CONTACT_REACH).all(axis=1)
+    assert _contact_figures("contact_panel_on_wall", "Wall", near) <= TOLERANCE
+
+
+@pytest.mark.slow
+def test_emissive_tube_lying_on_a_floor_matches_cycles_at_the_contact(empty_scene):
+    """A 0.4 m tube along x resting on an edge, GAP above the floor's vertex row y = 0."""
+    floor = _mesh("Floor", cuts=CONTACT_CUTS, size=CONTACT_SIZE)
+    radius, length = 0.05, 0.4
+    bpy.ops.mesh.primitive_cylinder_add(vertices=24, radius=radius, depth=length,
+                                        location=(0.0, 0.0, radius + GAP), rotation=(0.0, 0.5 * math.pi, 0.0))
+    bpy.context.object.data.materials.append(_emissive_material(10.0))
+    bpy.context.view_layer.update()
+    p = _positions(floor)
+    near = (np.abs(p[:, 0]) <= 0.5 * length + CONTACT_REACH) & (np.abs(p[:, 1]) <= radius + CONTACT_REACH)
+    assert _contact_figures("contact_tube_on_floor", "Floor", near) <= TOLERANCE

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake, elements
+from radiosity_baker.core import Settings, bake, direct, elements
 from radiosity_baker.core.scene import LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SHAPE_ELLIPSE
 
 F_UNIT_SQUARE_H1 = 0.23946  # point under a unit square at height 1
@@ -30,6 +30,19 @@ def test_point_lamp_follows_inverse_square_and_cosine():
     d2 = (v ** 2).sum(1)
     expect = np.outer(v[:, 2] / np.sqrt(d2) / (4 * np.pi ** 2 * d2), [100, 50, 10])
     np.testing.assert_allclose(lit, expect, rtol=1e-4)
+
+
+def test_a_point_lamp_of_radius_r_lights_as_cycles_over_d2_plus_r2():
+    """Cycles gives a sphere lamp's light as a disk of its radius facing the receiver would:
+    P·cosθ/(4π²(d² + r²)), 1/(1 + r²/d²) of the point's (measured through bpy, DESIGN.md Units)."""
+    p, n, t = receiver_plane()
+    for radius in (0.0, 0.1, 0.15):
+        lamp = shapes.lamp(LAMP_POINT, (0, 0, 0.3), size=(radius, radius), power=(60,) * 3)
+        lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3)], lamp)
+        v = np.array([0, 0, 0.3]) - receivers(p, n, t)
+        d2 = (v ** 2).sum(1)
+        expect = 60 * v[:, 2] / np.sqrt(d2) / (4 * np.pi ** 2 * (d2 + radius ** 2))
+        np.testing.assert_allclose(lit, np.repeat(expect[:, None], 3, 1), rtol=1e-4)
 
 
 def test_spot_lamp_is_a_point_lamp_inside_its_cone_and_dark_outside():
@@ -159,6 +172,41 @@ def test_area_lamp_with_occluder_gives_a_soft_penumbra():
     assert np.all(frac[r < 0.2] < 0.02)
     assert np.all(frac[r > 1.4] > 0.98)
     assert ((frac > 0.1) & (frac < 0.9)).sum() > 20
+
+
+def _corner_ff(x, y, h):
+    """Form factor from a point at height h under the corner (0, 0) of the rectangle [0, x]×[0, y]
+    (parallel, facing it), signed by x·y so rectangles add up by superposition."""
+    a, b = np.abs(x) / h, np.abs(y) / h
+    f = (a / np.sqrt(1 + a * a) * np.arctan(b / np.sqrt(1 + a * a))
+         + b / np.sqrt(1 + b * b) * np.arctan(a / np.sqrt(1 + b * b))) / (2 * np.pi)
+    return np.sign(x) * np.sign(y) * f
+
+
+def test_closed_sides_tell_outward_and_inward_windings_from_open_surfaces():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    tet = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    np.testing.assert_array_equal(direct.closed_sides(v[tet]), 1.0)
+    np.testing.assert_array_equal(direct.closed_sides(v[tet[:, ::-1]]), -1.0)
+    np.testing.assert_array_equal(direct.closed_sides(v[tet[:3]]), 0.0)  # one face missing
+    two = direct.closed_sides(np.concatenate([v[tet], v[tet[:, ::-1]] + 5.0, v[tet[:3]] - 5.0]))
+    np.testing.assert_array_equal(two, [1.0] * 4 + [-1.0] * 4 + [0.0] * 3)
+
+
+def test_a_closed_emitter_spends_few_samples_on_the_sides_it_hides_from_outside():
+    """An emissive closed cube (side 0.2 m, 2×2 quads a face, radiance 1) 0.5 m over a 0.1 m
+    receiver grid: from below only its bottom face is seen (the others show the receivers their
+    inner sides, hidden by the cube itself), so the light is that face's form factor. Those sides
+    are weighed 1/64 of their unoccluded light, so few of the 64 samples land on them; weighed
+    fully (before), about 60 % did. Bound: relative RMSE 2.2 % (measured before 2.8 %, after
+    1.6 %; 0.24 % at 1024 samples)."""
+    p, n, t = shapes.grid(0.1, 8)
+    cube = [(q, m, u, (0.0,) * 3, (1.0,) * 3) for q, m, u in shapes.box(0.2, 2, centre=(0.0, 0.0, 0.6))]
+    lit = bake_direct([(p, n, t, (0.5,) * 3, (0,) * 3), *cube], samples=64)[:len(p), 0]
+    x, y = receivers(p, n, t)[:, :2].T
+    expect = (_corner_ff(0.1 - x, 0.1 - y, 0.5) - _corner_ff(-0.1 - x, 0.1 - y, 0.5)
+              - _corner_ff(0.1 - x, -0.1 - y, 0.5) + _corner_ff(-0.1 - x, -0.1 - y, 0.5))
+    assert np.sqrt(np.mean((lit - expect) ** 2)) / expect.mean() < 0.022
 
 
 def closed_flat(shape):
