@@ -12,9 +12,18 @@ matte Principled BSDFs (Specular IOR Level 0), emitters black with Emission Stre
 """
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 import bmesh
 import bpy
 import numpy as np
+
+# sample_blends/make_samples.py (not a package): its mesh builder
+_spec = importlib.util.spec_from_file_location(
+    "make_samples", Path(__file__).resolve().parents[1] / "sample_blends" / "make_samples.py")
+make_samples = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(make_samples)
 
 
 def _empty():
@@ -37,25 +46,6 @@ def _material(name, color, emission=0.0):
         bsdf.inputs["Emission Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         bsdf.inputs["Emission Strength"].default_value = emission
     return mat
-
-
-def _object(name, verts, faces, material, flip=False):
-    """A flat-shaded mesh object of ``verts`` (float[V,3]) and ``faces`` (corner lists), coincident
-    vertices merged, its faces reversed if ``flip``."""
-    me = bpy.data.meshes.new(name)
-    me.from_pydata(np.asarray(verts, float).tolist(), [], [[int(i) for i in f] for f in faces])
-    bm = bmesh.new()
-    bm.from_mesh(me)
-    bmesh.ops.remove_doubles(bm, verts=bm.verts, dist=1e-6)
-    if flip:
-        bmesh.ops.reverse_faces(bm, faces=bm.faces)
-    bm.to_mesh(me)
-    bm.free()
-    me.shade_flat()
-    me.materials.append(material)
-    ob = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
 
 
 def _box(centre, size, cell):
@@ -114,17 +104,17 @@ def flat_furnace():
 def emissive_room():
     _empty()
     verts, faces = _box((0.0, 0.0, 1.3), (4.0, 3.0, 2.6), 0.2)
-    _object("Room", verts, faces, _material("Wall", (0.7,) * 3), flip=True)
+    make_samples.flat_object("Room", verts, faces, _material("Wall", (0.7,) * 3), flip=True)
     verts, faces = _box((0.6, 0.3, 0.3), (0.6, 0.6, 0.6), 0.1)
-    _object("Block", verts, faces, _material("Block", (0.6, 0.5, 0.4)))
+    make_samples.flat_object("Block", verts, faces, _material("Block", (0.6, 0.5, 0.4)))
     s = np.linspace(0.0, 1.0, 97)
     sign = np.stack([-1.2 + 2.4 * s, np.full_like(s, 1.42), 1.7 + 0.25 * np.sin(6 * np.pi * s)], 1)
     verts, faces = _tube(sign, 0.02, 12)
-    _object("Sign", verts, faces, _material("Neon", (0.0,) * 3, emission=20.0))
+    make_samples.flat_object("Sign", verts, faces, _material("Neon", (0.0,) * 3, emission=20.0))
     s = np.linspace(0.0, 1.0, 25)
     floor_tube = np.stack([-1.0 + 1.0 * s, -0.6 + 0.3 * np.sin(2 * np.pi * s), np.full_like(s, 0.03)], 1)
     verts, faces = _tube(floor_tube, 0.03, 12)
-    _object("Tube", verts, faces, _material("Glow", (0.0,) * 3, emission=10.0))
+    make_samples.flat_object("Tube", verts, faces, _material("Glow", (0.0,) * 3, emission=10.0))
     for k, location in enumerate(((-1.2, -0.8, 2.3), (1.3, 0.6, 2.2))):
         data = bpy.data.lights.new(f"Lamp{k}", "POINT")
         data.energy = 60.0

@@ -125,11 +125,19 @@ def mesh_object(name: str, quads: list[np.ndarray], cell: float, material) -> bp
         verts.append(v)
         faces.append(f + offset)
         offset += len(v)
+    return flat_object(name, np.concatenate(verts), np.concatenate(faces), material)
+
+
+def flat_object(name: str, verts, faces, material, flip: bool = False) -> bpy.types.Object:
+    """A flat-shaded mesh object of ``verts`` (float[V,3]) and ``faces`` (corner lists), coincident
+    vertices merged, its faces reversed if ``flip``, linked to the scene."""
     me = bpy.data.meshes.new(name)
-    me.from_pydata(np.concatenate(verts).tolist(), [], np.concatenate(faces).tolist())
+    me.from_pydata(np.asarray(verts, float).tolist(), [], [[int(i) for i in f] for f in faces])
     bm = bmesh.new()
     bm.from_mesh(me)
     bmesh.ops.remove_doubles(bm, verts=bm.verts, dist=1e-6)
+    if flip:
+        bmesh.ops.reverse_faces(bm, faces=bm.faces)
     bm.to_mesh(me)
     bm.free()
     me.shade_flat()

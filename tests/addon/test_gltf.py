@@ -21,6 +21,17 @@ FAST = ["--method", "direct", "--samples", "4", "--target", "both", "--texel-den
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_blends"
 
 
+
+def _bake_with_gltf(tmp_path):
+    """Save the open file as tmp/in.blend, bake it into lightmaps with ``--gltf``; (the saved
+    .blend, the GLB)."""
+    blend, saved, glb = tmp_path / "in.blend", tmp_path / "out.blend", tmp_path / "out.glb"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli.main(["bake", str(blend), *FAST, "--output", str(tmp_path / "maps"),
+                     "--gltf", str(glb), "--save", str(saved)]) == 0
+    return saved, glb
+
+
 def read_glb(path: Path) -> tuple[dict, bytes]:
     """(JSON, binary chunk) of a GLB file."""
     data = path.read_bytes()
@@ -217,10 +228,7 @@ def test_textures_follow_their_uv_maps_when_the_lightmap_moves_to_texcoord_1(emp
                     "vector", [value] * (2 * len(ob.data.loops)))
             ob.data.materials.append(mat)
     tex.image.pack()
-    blend, saved, glb = tmp_path / "in.blend", tmp_path / "out.blend", tmp_path / "out.glb"
-    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-    assert cli.main(["bake", str(blend), *FAST, "--output", str(tmp_path / "maps"),
-                     "--gltf", str(glb), "--save", str(saved)]) == 0
+    saved, glb = _bake_with_gltf(tmp_path)
     doc, binary = read_glb(glb)
     (material,) = doc["materials"]
     assert material["pbrMetallicRoughness"]["baseColorTexture"]["texCoord"] == 2
@@ -279,10 +287,7 @@ def test_file_export_with_the_addon_enabled_uses_the_panel_settings(samples, add
 def test_objects_without_a_material_get_a_grey_one_with_their_lightmap_in_the_file_only(
         empty_scene, tmp_path):
     lit_ground(empty_scene)  # no materials: the bake took them for grey 0.8
-    blend, saved, glb = tmp_path / "in.blend", tmp_path / "out.blend", tmp_path / "out.glb"
-    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-    assert cli.main(["bake", str(blend), *FAST, "--output", str(tmp_path / "maps"),
-                     "--gltf", str(glb), "--save", str(saved)]) == 0
+    saved, glb = _bake_with_gltf(tmp_path)
     doc, _ = read_glb(glb)
     (material,) = doc["materials"]
     assert material["pbrMetallicRoughness"] == {"baseColorFactor": [0.8, 0.8, 0.8, 1.0],
