@@ -134,15 +134,21 @@ def direct_runs(light_samples, selections, device) -> dict:
             for sel in selections for n in light_samples}
 
 
-def run_scene(scene_name, methods, samples, reference_samples, device, with_ao, passes="all",
-              light_samples=(64,), selections=("auto",)):
-    """One sample scene (``sample_blends``) or scene built in code (``emissive_scenes.SCENES``);
-    ``passes`` direct compares direct light alone (``direct_runs``, no AO)."""
+def _open(scene_name):
+    """Open a sample scene (``sample_blends``) or build one in code (``emissive_scenes.SCENES``);
+    the scene."""
     if scene_name in emissive_scenes.SCENES:
         emissive_scenes.SCENES[scene_name]()
     else:
         bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / f"{scene_name}.blend"))
-    scene = bpy.context.scene
+    return bpy.context.scene
+
+
+def run_scene(scene_name, methods, samples, reference_samples, device, with_ao, passes="all",
+              light_samples=(64,), selections=("auto",)):
+    """One sample scene (``sample_blends``) or scene built in code (``emissive_scenes.SCENES``);
+    ``passes`` direct compares direct light alone (``direct_runs``, no AO)."""
+    scene = _open(scene_name)
     names = receivers(scene)
     print(f"{scene_name}: {', '.join(names)}", flush=True)
     out = {"receivers": names, "vertices": int(sum(len(scene.objects[n].data.vertices) for n in names)),
@@ -261,13 +267,14 @@ def _ms(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
     return float(((a[mask] - b[mask]) ** 2).sum(axis=1).mean())
 
 
-def _our_lightmap(names, size: int, output: Path):
-    """Our lightmap of ``names`` on one page of ``size`` (the default method and settings), baked through the add-on so the ``Lightmap`` UVs Cycles bakes through are written:
-    (page, wall seconds from extraction to written files, timings)."""
+def _our_lightmap(names, size: int, output: Path, method: dict):
+    """Our lightmap of ``names`` on one page of ``size`` (the default settings but ``method``:
+    Settings fields), baked through the add-on so the ``Lightmap`` UVs Cycles bakes through are
+    written: (page, wall seconds from extraction to written files, timings)."""
     from radiosity_baker.addon.job import BakeJob
 
-    settings = Settings(target="lightmap", max_size=size, texel_density=1e4,
-                        padding=2, supersample=2, atlas_pages="one", reunwrap=True, output=str(output))
+    settings = Settings(target="lightmap", max_size=size, texel_density=1e4, padding=2, supersample=2,
+                        atlas_pages="one", reunwrap=True, output=str(output), **method)
     t0 = time.perf_counter()
     job = BakeJob(settings, names)
     job.run_sync(bpy.context)
@@ -275,8 +282,9 @@ def _our_lightmap(names, size: int, output: Path):
 
 
 def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes, pair_samples,
-                 extrapolated_sizes, output: Path) -> dict:
-    """Lightmaps of ``scene_name`` against Cycles' image bake through the same UVs.
+                 extrapolated_sizes, output: Path, passes="all", method=None) -> dict:
+    """Lightmaps of ``scene_name`` against Cycles' image bake through the same UVs: its DIFFUSE
+    ``passes`` against ours with ``method`` (Settings fields; None: the defaults).
 
     At ``truth_size``: our page, Cycles at each of ``samples`` and a ``reference_samples`` truth;
     each Cycles bake also denoised (OIDN ``RTLightmap``, where pyoidn is installed). At each of
@@ -291,12 +299,17 @@ def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes,
     vertices, against raw Cycles and against Cycles + OIDN.
     """
     pyoidn = _oidn()
-    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / f"{scene_name}.blend"))
-    names = sorted(o.name for o in bpy.context.scene.objects if o.type == "MESH" and o.name != "Light")
-    out = {"objects": names, "method": Settings().method, "denoiser": "OIDN RTLightmap (pyoidn)" if pyoidn else None,
+    method = dict(method or {})
+    scene = _open(scene_name)
+    # the sample scenes: every mesh but the Cornell light; scenes built in code: their reflectors
+    names = (receivers(scene) if scene_name in emissive_scenes.SCENES
+             else sorted(o.name for o in scene.objects if o.type == "MESH" and o.name != "Light"))
+    out = {"objects": names, "method": method.get("method", Settings().method), "settings": method,
+           "passes": list(PASSES[passes]),
+           "denoiser": "OIDN RTLightmap (pyoidn)" if pyoidn else None,
            "denoiser_note": None if pyoidn else "pyoidn is not installed: no denoised curve", "sizes": {}}
     for size in [truth_size, *pair_sizes, *extrapolated_sizes]:
-        page, seconds, timings = _our_lightmap(names, size, output / f"ours-{size}")
+        page, seconds, timings = _our_lightmap(names, size, output / f"ours-{size}", method)
         w, h = page.size
         row = {"size": [w, h], "texels": int(page.covered.sum()), "ours_seconds": round(seconds, 3),
                "ours_stages": {k: round(v, 3) for k, v in timings.items()}}
@@ -305,7 +318,7 @@ def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes,
 
         def cycles(s, seed):
             t0 = time.perf_counter()
-            image = cycles_bake_image(names, "Lightmap", w, h, samples=s, seed=seed)
+            image = cycles_bake_image(names, "Lightmap", w, h, samples=s, seed=seed, passes=PASSES[passes])
             bake[(s, seed)] = (image, time.perf_counter() - t0)
             print(f"  lightmap {size}: cycles {s} spp seed {seed}: {bake[(s, seed)][1]:.1f} s", flush=True)
             return bake[(s, seed)]
@@ -392,7 +405,10 @@ def lightmap_markdown(results) -> str:
         speed = "; ".join(f"{r[f'speedup_vs_{k}']:.1f}×{'*' if r[f'{k}_extrapolated'] else ''} vs {label}"
                           for k, label in (("cycles", "Cycles"), ("cycles_oidn", "Cycles + OIDN"))
                           if f"speedup_vs_{k}" in r)
-        lines.append(f"| {w}×{h} | **ours** ({results['lightmap']['method']}, {r['texels']} texels) | "
+        settings = results["lightmap"].get("settings", {})
+        label = " ".join(str(settings[k]) for k in ("light_selection", "light_samples") if k in settings)
+        lines.append(f"| {w}×{h} | **ours** ({results['lightmap']['method']}{' ' + label if label else ''}, "
+                     f"{r['texels']} texels) | "
                      f"{r['ours_seconds']:.1f} | "
                      f"{r['ours_relative_rmse']:.4f} | {speed} | |")
     return "\n".join(lines)
@@ -427,6 +443,15 @@ def lightmap_plot(results, path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
+def _lightmap_method(args) -> dict:
+    """Settings fields of our lightmap bake: with ``--passes direct`` the direct method at the
+    first of ``--light-samples`` and ``--light-selections``; else the defaults but the device."""
+    if args.passes != "direct":
+        return {"device": args.device}
+    return {"method": "direct", "light_samples": args.light_samples[0],
+            "light_selection": args.light_selections[0], "device": args.device}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenes", nargs="+", default=["cornell_box", "lamp_scene"])
@@ -445,7 +470,8 @@ def main(argv=None) -> int:
     parser.add_argument("--output", type=Path, default=ROOT / "bench" / "results")
     parser.add_argument("--lightmap", action="store_true",
                         help="compare lightmaps with Cycles' image bake instead")
-    parser.add_argument("--lightmap-scene", default="cornell_box")
+    parser.add_argument("--lightmap-scene", default="cornell_box",
+                        help="a sample scene or one built in code (emissive_room, flat_furnace)")
     parser.add_argument("--truth-size", type=int, default=256, help="page with a high-sample Cycles truth")
     parser.add_argument("--pair-sizes", type=int, nargs="*", default=[1024],
                         help="pages whose Cycles noise is measured from pairs of bakes")
@@ -463,9 +489,11 @@ def main(argv=None) -> int:
                    "lightmap": {"scene": args.lightmap_scene,
                                 **run_lightmap(args.lightmap_scene, args.truth_size, args.samples,
                                                args.reference_samples, args.pair_sizes, args.pair_samples,
-                                               args.extrapolated_sizes, Path(tempfile.mkdtemp(prefix="rb-acc-")))},
+                                               args.extrapolated_sizes, Path(tempfile.mkdtemp(prefix="rb-acc-")),
+                                               args.passes, _lightmap_method(args))},
                    "load_at_end": round(os.getloadavg()[0], 2)}
-        return _write(args.output / f"accuracy-lightmap-{machine}-{stamp}", results, lightmap_markdown,
+        kind = "-direct" if args.passes == "direct" else ""
+        return _write(args.output / f"accuracy-lightmap{kind}-{machine}-{stamp}", results, lightmap_markdown,
                       lightmap_plot)
     results = {"machine": machine, "date": stamp, "platform": platform.platform(),
                "cpu_count": __import__("os").cpu_count(), "blender": bpy.app.version_string,

@@ -28,7 +28,7 @@ import warp as wp
 
 from . import device as device_mod
 from . import lighttree
-from .formfactor import outline_ff, plane_side, tangent_frame, triangle_ff
+from .formfactor import FAR_REACH, far_triangle_ff, outline_ff, tangent_frame, triangle_ff
 from .rays import lift, lift_towards, visible
 from .scene import LAMP_AREA, LAMP_SPOT, LAMP_SUN, SceneData
 from .sh import moment_of
@@ -56,7 +56,9 @@ class Emitters:
 
     lamp_*: one entry per lamp (see ``core.scene.Lamps``; unit direction and axes, spot cones as
     the cosine of the half angle and the smoothstep width of the blend); em_v0, em_v1, em_v2:
-    vec3[E] corners of the emissive triangles with area, em_radiance: vec3[E]; em_side:
+    vec3[E] corners of the emissive triangles with area, em_centre, em_normal: vec3[E] their centroids
+    and unit winding normals, em_area: float32[E] (m²), em_reach: float32[E] the farthest corner
+    from the centroid (m), em_radiance: vec3[E]; em_side:
     float32[E] where each lies on a closed surface of emissive triangles (``closed_sides``);
     closed: the ``wp.Mesh`` id of those closed surfaces wound outward (winding numbers tell a
     receiver inside them; 0 without any); tree: the ``lighttree.LightTree`` over all of them.
@@ -75,6 +77,10 @@ class Emitters:
     em_v0: wp.array(dtype=wp.vec3)
     em_v1: wp.array(dtype=wp.vec3)
     em_v2: wp.array(dtype=wp.vec3)
+    em_centre: wp.array(dtype=wp.vec3)
+    em_normal: wp.array(dtype=wp.vec3)
+    em_area: wp.array(dtype=wp.float32)
+    em_reach: wp.array(dtype=wp.float32)
     em_radiance: wp.array(dtype=wp.vec3)
     em_side: wp.array(dtype=wp.float32)
     closed: wp.uint64
@@ -99,6 +105,12 @@ class Lights:
         g = Emitters()
         g.em_v0, g.em_v1, g.em_v2 = (wp.array(np.ascontiguousarray(tri[:, k], np.float32), dtype=wp.vec3,
                                               device=d) for k in range(3))
+        centre = tri.mean(axis=1)
+        g.em_centre = wp.array(centre.astype(np.float32), dtype=wp.vec3, device=d)
+        g.em_normal = wp.array(unit(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])), dtype=wp.vec3, device=d)
+        g.em_area = wp.array(scene.triangle_areas()[emissive].astype(np.float32), dtype=wp.float32, device=d)
+        g.em_reach = wp.array(np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1).astype(np.float32),
+                              dtype=wp.float32, device=d)
         g.em_radiance = wp.array(radiance, dtype=wp.vec3, device=d)
         side = closed_sides(tri)
         g.em_side = wp.array(side, dtype=wp.float32, device=d)
@@ -412,8 +424,20 @@ def _lamp_shadow(g: Emitters, mesh: wp.uint64, l: int, p: wp.vec3, n: wp.vec3, o
 @wp.func
 def _triangle_transfer(g: Emitters, e: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
     """Unoccluded lighting of emissive triangle e at p (normal n): its radiance × the exact form
-    factor (both faces emit; none where p lies in its plane, ``triangle_ff``)."""
-    ff = triangle_ff(p, n, g.em_v0[e], g.em_v1[e], g.em_v2[e])
+    factor (both faces emit; none where p lies in its plane, ``triangle_ff``), from a quadrature
+    where the triangle is far and above p's horizon (``far_triangle_ff``: 3–4× cheaper); none where
+    it lies wholly below that horizon."""
+    d = g.em_centre[e] - p
+    reach = g.em_reach[e]
+    up = wp.dot(n, d)
+    if up < -reach:
+        return wp.vec3(0.0)  # wholly below p's horizon
+    ff = float(0.0)
+    if up > reach and wp.dot(d, d) > (FAR_REACH * FAR_REACH) * (reach * reach):
+        ff = far_triangle_ff(p, n, g.em_v0[e], g.em_v1[e], g.em_v2[e], g.em_centre[e], g.em_normal[e],
+                             g.em_area[e])
+    else:
+        ff = triangle_ff(p, n, g.em_v0[e], g.em_v1[e], g.em_v2[e])
     if ff <= 0.0:
         return wp.vec3(0.0)
     return g.em_radiance[e] * ff
@@ -463,20 +487,27 @@ INNER_WEIGHT = wp.constant(1.0 / 64.0)
 
 
 @wp.func
-def _leaf_light(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3, outside: float):
+def _leaf_light(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3, outside: float, shadows: int):
     """(unoccluded lighting vec3, weight, spot) of ``leaf`` at p: the weight, how likely it is
     chosen among its bucket, is the lighting's RGB sum (for a point-like spot times its cone, which
     then decides alone whether it lights p; for a triangle of a closed emissive surface that shows
     p the side it hides times INNER_WEIGHT: its inner side where ``outside`` is 1 (p outside the
     closed surfaces), its outer side where it is −1 (p inside), neither where it is 0); spot 1 for
-    a spot lamp, whose cone the shadow applies."""
+    a spot lamp, whose cone the shadow applies. Without ``shadows`` (an unshadowed estimate) such a
+    hidden side is no light at all: its own surface hides it, the one shadow known without rays
+    (counted, it nearly doubled the unshadowed light of a neon tube)."""
     t = _leaf_transfer(g, leaf, p, n)
     w = t[0] + t[1] + t[2]
     i = g.tree.leaf_index[leaf]
     spot = int(0)
     if g.tree.leaf_kind[leaf] == lighttree.LEAF_TRIANGLE:
-        if w > 0.0 and outside * g.em_side[i] * plane_side(p, g.em_v0[i], g.em_v1[i], g.em_v2[i]) < 0.0:
-            w *= INNER_WEIGHT
+        # a lit triangle shows p its front where p lies above its plane (no rounding matters: p
+        # in its plane gets no light from it)
+        if w > 0.0 and g.em_side[i] != 0.0:
+            if outside * g.em_side[i] * wp.dot(p - g.em_centre[i], g.em_normal[i]) < 0.0:
+                if shadows == 0:
+                    return wp.vec3(0.0), 0.0, spot
+                w *= INNER_WEIGHT
     if g.tree.leaf_kind[leaf] == lighttree.LEAF_LAMP:
         if g.lamp_kind[i] == LAMP_SPOT:
             spot = 1
@@ -495,7 +526,7 @@ def leaf_direction(g: Emitters, leaf: int, p: wp.vec3) -> wp.vec3:
         if g.lamp_kind[i] == LAMP_SUN:
             return -g.lamp_dir[i]
         return wp.normalize(g.lamp_pos[i] - p)
-    return wp.normalize((g.em_v0[i] + g.em_v1[i] + g.em_v2[i]) / 3.0 - p)
+    return wp.normalize(g.em_centre[i] - p)
 
 
 @wp.func
@@ -507,7 +538,7 @@ def _importance(g: Emitters, node: int, p: wp.vec3, n: wp.vec3) -> float:
         return lighttree.bound_importance(t, node, p, n)
     s = float(0.0)
     for j in range(t.first[node], t.first[node] + t.count[node]):
-        tj, w, sj = _leaf_light(g, j, p, n, 0.0)
+        tj, w, sj = _leaf_light(g, j, p, n, 0.0, 1)
         s += w
     return s
 
@@ -626,7 +657,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
         light_moment = wp.mat33(0.0)
         spots = int(0)
         for j in range(leaves):
-            tj, wj, sj = _leaf_light(g, first + j, p, n, outside)
+            tj, wj, sj = _leaf_light(g, first + j, p, n, outside, shadows)
             if j < BUCKET:
                 weights[j] = wj
                 red[j] = tj[0]
@@ -637,7 +668,8 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             if wj > 0.0:
                 total += wj
                 light += tj
-                light_moment += moment_of(tj, leaf_direction(g, first + j, p), n)
+                if shadows == 0:
+                    light_moment += moment_of(tj, leaf_direction(g, first + j, p), n)
                 spots += sj
         if total <= 0.0:
             continue
@@ -660,7 +692,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             elif row >= 0:
                 w = kept[row, first + j]
             else:
-                tj, w, sj = _leaf_light(g, first + j, p, n, outside)
+                tj, w, sj = _leaf_light(g, first + j, p, n, outside, shadows)
             if w <= 0.0:
                 continue
             cum += w
@@ -738,13 +770,14 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
                    seed: int, first: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
                    rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
                    noise: wp.array(dtype=wp.float32), with_moments: int,
-                   moments: wp.array(dtype=wp.mat33), kept: wp.array2d(dtype=wp.float32)):
+                   moments: wp.array(dtype=wp.mat33), keep: int, kept: wp.array2d(dtype=wp.float32)):
     """Per receiver by ``mode``: FULL ``count`` shadowed samples; UNSHADOWED the same without
     shadows; PROBE one sample, the receiver's own of its tile's stratified set (tile_index of
     tile_count, seeded per tile); SKIP nothing (0). Receiver i's jitter is seeded by first + i (its
     index in the whole set). flags: 1 lit, 2 dark, 3 both; noise: relative standard error;
-    moments (``with_moments`` 1): where the light comes from (see _estimate); kept: float32[N,
-    leaves] scratch for ``exact`` weights (see _estimate), or [1, 1] to weigh twice."""
+    moments (``with_moments`` 1): where the light comes from (see _estimate); keep 1: kept is
+    float32[W, leaves] scratch for ``exact`` weights (see _estimate), receiver i in row i mod W,
+    each launch wave W receivers or fewer; keep 0: weigh twice."""
     i = wp.tid() + offset
     md = mode[i]
     if md == MODE_SKIP:
@@ -771,8 +804,8 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
     if md == MODE_UNSHADOWED:
         shadows = 0
     row = int(-1)
-    if kept.shape[0] > 1:
-        row = i
+    if keep != 0:
+        row = i % kept.shape[0]
     value, nr, lit, dark, err, moment = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows,
                                                   exact, far, kept, row)
     out[i] = value
@@ -785,7 +818,8 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
 
 def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray, mode: np.ndarray,
              count: int, seed: int, tiles=None, progress: Optional[Callable[[float], None]] = None,
-             first: int = 0, whole: Optional[int] = None, with_moments: bool = False):
+             first: int = 0, whole: Optional[int] = None, with_moments: bool = False,
+             exact: Optional[bool] = None):
     """One pass of the direct-light kernel over N receivers of ``problem``.
 
     points, normals: float32[N,3] (m, the problem's frame; unit); sizes: float32[N] local feature
@@ -794,7 +828,8 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     receiver's index in its tile int[N], receivers in its tile int[N]); first: the index of these
     receivers' first in the whole set they are part of (a lightmap page baked alone), which seeds
     their jitter, and whole: that set's size (it decides exact emitter weighing), None: N — so a
-    part gets the light the whole would. Returns (float32[N,3]
+    part gets the light the whole would; exact: whether every emitter is weighed exactly (None:
+    ``exact_selection``). Returns (float32[N,3]
     lighting, int64[N] rays, int32[N] flags: 1 some emitter was seen, 2 some was shadowed, 3 both;
     float32[N] noise: each estimate's standard error relative to it, see ``_estimate``), and with
     ``with_moments`` a fifth, float32[N,3,3]: per receiver rows R, G, B of the light's first moment
@@ -811,10 +846,16 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     if tiles is None:
         tiles = (np.zeros(1, np.int32),) * 3
     tile_arrays = [wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=d) for a in tiles]
-    exact = exact_selection(problem, n if whole is None else whole)
+    if exact is None:
+        exact = exact_selection(problem, n if whole is None else whole)
     leaves = problem.lights.num_lamps + problem.lights.num_emitters
-    # exact weights kept per receiver while that stays within EXACT_WORK floats (else weighed twice)
-    kept = wp.empty((n, leaves) if exact and 1 < n * leaves <= EXACT_WORK else (1, 1), dtype=wp.float32, device=d)
+    # exact weights kept per receiver, for as many receivers per launch wave as KEPT_FLOATS allow
+    chunks = max(1, min(32, n // 256))
+    keep = exact and leaves <= KEPT_FLOATS
+    if keep:
+        chunks = max(chunks, -(-n * leaves // KEPT_FLOATS))
+    wave = -(-n // max(1, min(chunks, n)))
+    kept = wp.empty((wave, leaves) if keep else (1, 1), dtype=wp.float32, device=d)
     device_mod.launch(
         _direct_kernel, n,
         [problem.mesh.id, problem.lights.emitters,
@@ -823,8 +864,8 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
          wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
          wp.array(np.ascontiguousarray(mode, np.int32), dtype=wp.int32, device=d), int(count),
          *tile_arrays, int(seed), int(first), int(exact), problem.far, out, rays, flags, noise,
-         int(with_moments), moments, kept],
-        dev, chunks=max(1, min(32, n // 256)), on_chunk=progress)
+         int(with_moments), moments, int(keep), kept],
+        dev, chunks=chunks, on_chunk=progress)
     result = (out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy(),
               noise.numpy())
     return result + (moments.numpy(),) if with_moments else result
@@ -881,7 +922,9 @@ def lit_backs(problem) -> tuple[list, int]:
 # EXACT_EMITTERS (about as much work per receiver as a few shadow rays) or where that is at most
 # EXACT_WORK weighings in all (a few seconds).
 EXACT_EMITTERS = 16
-EXACT_WORK = 1 << 24
+EXACT_WORK = 1 << 27
+# Most exact weights (float32) kept at once, per launch wave: 256 MB.
+KEPT_FLOATS = 1 << 26
 
 
 def exact_selection(problem, receivers: int) -> bool:

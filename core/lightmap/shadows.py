@@ -88,10 +88,12 @@ def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, 
     per_tile = np.bincount(tile, minlength=base)
     index = np.empty(n, np.int64)
     index[order] = np.arange(n) - np.repeat(np.cumsum(per_tile) - per_tile, per_tile)
+    # a probe only tells lit from shadowed: the light tree picks its emitter (any choice would
+    # do), where weighing every emitter exactly would cost as much as a full estimate
     _, probe_rays, flags, _ = direct.estimate(problem, points, normals, sizes,
                                            np.full(n, direct.MODE_PROBE, np.int32), 1, settings.seed,
                                            (tile, index, per_tile[tile]),
-                                           progress=lambda f: report(0.2 * f), **seeding)
+                                           progress=lambda f: report(0.2 * f), exact=False, **seeding)
     mode = np.full(n, direct.MODE_FULL, np.int32)
     for texels, shape, first, rows in grids:
         cls = _settled(_tile_classes(flags[rows], tile[rows] - first, shape)).ravel()[tile[rows] - first]

@@ -4,7 +4,7 @@ import pytest
 import warp as wp
 
 from radiosity_baker.core import device
-from radiosity_baker.core.formfactor import disk_ff, outline_ff, triangle_ff
+from radiosity_baker.core.formfactor import FAR_REACH, disk_ff, far_triangle_ff, outline_ff, triangle_ff
 
 device.init_warp()
 
@@ -14,6 +14,15 @@ def _tri_kernel(p: wp.array(dtype=wp.vec3), n: wp.array(dtype=wp.vec3), v: wp.ar
                 out: wp.array(dtype=float)):
     i = wp.tid()
     out[i] = triangle_ff(p[i], n[i], v[3 * i], v[3 * i + 1], v[3 * i + 2])
+
+
+@wp.kernel
+def _far_kernel(p: wp.array(dtype=wp.vec3), n: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3),
+                out: wp.array(dtype=float)):
+    i = wp.tid()
+    a, b, c = v[3 * i], v[3 * i + 1], v[3 * i + 2]
+    out[i] = far_triangle_ff(p[i], n[i], a, b, c, (a + b + c) / 3.0, wp.normalize(wp.cross(b - a, c - a)),
+                             0.5 * wp.length(wp.cross(b - a, c - a)))
 
 
 @wp.kernel
@@ -104,3 +113,43 @@ def test_lamp_outline_matches_exact_values(ellipse, count, expect):
     half = 0.5 if ellipse == 0 else 1.0
     wp.launch(_outline_kernel, dim=1, inputs=[wp.vec3(0, 0, 0), wp.vec3(0, 0, 1), half, half, ellipse, count, out])
     assert out.numpy()[0] == pytest.approx(expect, rel=1e-3)
+
+
+def contour_ff(p, n, tris):
+    """float64[k] exact form factors from points p (float[k,3], normals n) to triangles
+    float[k,3,3] wholly above their horizon: Lambert's contour integral in double precision."""
+    s = np.zeros(len(tris))
+    for k in range(3):
+        a = tris[:, k] - p
+        b = tris[:, (k + 1) % 3] - p
+        a /= np.linalg.norm(a, axis=1, keepdims=True)
+        b /= np.linalg.norm(b, axis=1, keepdims=True)
+        c = np.cross(a, b)
+        lc = np.linalg.norm(c, axis=1)
+        s += np.arctan2(lc, (a * b).sum(1)) * (n * c).sum(1) / lc
+    return np.abs(s) / (2 * np.pi)
+
+
+def test_far_triangles_quadrature_matches_the_exact_form_factor():
+    """Random triangles FAR_REACH to twice that many reaches (farthest corner from the centroid)
+    from random receivers that see them wholly above their horizon: the 3-point quadrature against
+    the contour integral in double precision. Bounds: worst 0.5 %, mean 0.05 % (measured 0.19 %
+    and 0.017 % in numpy; the centroid alone: 6.5 % and 1 %). The float32 contour integral itself
+    is off by up to 5 % on the faintest of these (form factors near 10⁻⁸)."""
+    rng = np.random.default_rng(3)
+    tris = rng.normal(size=(20000, 3, 3))
+    c = tris.mean(axis=1)
+    reach = np.linalg.norm(tris - c[:, None], axis=2).max(axis=1)
+    w = rng.normal(size=(len(tris), 3))
+    p = c + w / np.linalg.norm(w, axis=1, keepdims=True) * (reach * FAR_REACH * (1.0 + rng.random(len(tris))))[:, None]
+    n = rng.normal(size=(len(tris), 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    above = ((c - p) * n).sum(axis=1) > reach
+    tris, p, n = tris[above], p[above], n[above]
+    far = wp.zeros(len(tris), dtype=float, device="cpu")
+    wp.launch(_far_kernel, dim=len(tris), inputs=[wp.array(p.astype(np.float32), dtype=wp.vec3),
+                                                  wp.array(n.astype(np.float32), dtype=wp.vec3),
+                                                  wp.array(tris.astype(np.float32).reshape(-1, 3), dtype=wp.vec3), far])
+    rel = np.abs(far.numpy() / contour_ff(p, n, tris) - 1.0)
+    assert len(rel) > 4000
+    assert rel.max() < 0.005 and rel.mean() < 0.0005
