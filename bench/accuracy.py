@@ -268,13 +268,14 @@ def _ms(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
 
 
 def _our_lightmap(names, size: int, output: Path, method: dict):
-    """Our lightmap of ``names`` on one page of ``size`` (the default settings but ``method``:
-    Settings fields), baked through the add-on so the ``Lightmap`` UVs Cycles bakes through are
+    """Our lightmap of ``names`` on one page of ``size`` (the default settings, supersample 2, but
+    ``method``: Settings fields, which may override them), baked through the add-on so the ``Lightmap`` UVs Cycles bakes through are
     written: (page, wall seconds from extraction to written files, timings)."""
     from radiosity_baker.addon.job import BakeJob
 
-    settings = Settings(target="lightmap", max_size=size, texel_density=1e4, padding=2, supersample=2,
-                        atlas_pages="one", reunwrap=True, output=str(output), **method)
+    settings = Settings(**{"target": "lightmap", "max_size": size, "texel_density": 1e4, "padding": 2,
+                           "supersample": 2, "atlas_pages": "one", "reunwrap": True, "output": str(output),
+                           **method})
     t0 = time.perf_counter()
     job = BakeJob(settings, names)
     job.run_sync(bpy.context)

@@ -286,13 +286,29 @@ def test_a_closed_emitter_lights_every_lightmap_texel_inside_by_its_radiance(tmp
     np.testing.assert_allclose(page.rgb[page.covered], 1.0, rtol=0.005)
 
 
-@pytest.mark.parametrize("method, shape", [("reference", "cube"), ("hierarchical", "icosphere3")])
-def test_a_closed_emitter_furnace_reaches_the_analytic_radiosity(method, shape):
+# (method, shape, light samples, every vertex within 1 %); the torus's direct light is a noisy
+# estimate (emitters hide each other), so it takes more samples and only its RMSE is bounded.
+FURNACES = [("reference", "icosphere1", 64, True), ("reference", "icosphere2", 64, True),
+            ("reference", "cube", 64, True), ("reference", "torus", 1024, False),
+            ("hierarchical", "icosphere1", 64, False), ("hierarchical", "icosphere2", 64, True),
+            ("hierarchical", "icosphere3", 64, True), ("hierarchical", "cube", 64, True),
+            ("hierarchical", "torus", 1024, False)]
+
+
+@pytest.mark.parametrize("method, shape, samples, every", FURNACES)
+def test_a_closed_emitter_furnace_reaches_the_analytic_radiosity(method, shape, samples, every):
     """Radiance 1 and albedo 0.5 all round: B = E/(1 − ρ) = 2 at every vertex, with the direct light
-    each solver is given by the bake itself. Bound 1 %; measured worst vertex 0.29 % (reference,
-    cube) and 0.44 % (hierarchical, icosphere 3); the reference on icosphere 3 −0.34 % (84 s: not
-    run here). Coarser spheres read low by their tessellation: icosphere 2 −1.0 % (reference) and
-    −0.9 % (hierarchical), element disks sitting at their triangles' corners."""
-    result = bake(furnace(shape), Settings(method=method, content="combined", light_samples=64))
-    np.testing.assert_allclose(result.direct, 1.0, rtol=0.005)
-    np.testing.assert_allclose(result.output, 2.0, rtol=0.01)
+    each solver is given by the bake itself. Bounds: relative RMSE and mean within 1 %, and where
+    ``every``, every vertex. Measured (RMSE / worst vertex): reference icosphere 1 0.42 / −0.43 %,
+    icosphere 2 0.37 / −0.39 %, cube 0.12 / −0.15 %, torus 0.61 / −0.99 %; hierarchical
+    icosphere 1 0.95 / −1.97 % (80 faces: its clusters stand at their corners' mean, outside the
+    faces), icosphere 2 0.42 / −0.81 %, icosphere 3 −0.24 % worst, cube −0.81 / +0.95 % worst,
+    torus 0.58 / −2.0 %. Before the senders' disks stood at their triangles' centre, icosphere 2
+    read −1.04 % (reference; rows of its form factors summed to 0.979). Icosphere 4: see
+    tests/core/test_hierarchical.py; the reference there (15 360 elements) is too slow here."""
+    result = bake(furnace(shape), Settings(method=method, content="combined", light_samples=samples))
+    if every:
+        np.testing.assert_allclose(result.direct, 1.0, rtol=0.005)
+        np.testing.assert_allclose(result.output, 2.0, rtol=0.01)
+    error = result.output / 2.0 - 1.0
+    assert np.sqrt((error ** 2).mean()) < 0.01 and abs(error.mean()) < 0.01
