@@ -446,10 +446,13 @@ def lightmap_plot(results, path: Path) -> None:
 
 def _lightmap_method(args) -> dict:
     """Settings fields of our lightmap bake: with ``--passes direct`` the direct method at the
-    first of ``--light-samples`` and ``--light-selections``; else the defaults but the device."""
+    first of ``--light-samples`` and ``--light-selections``, one sample per texel (the default:
+    Cycles' image bake lights each texel at its centre — on the emissive room's 128 page
+    supersample 2 read 2.06 % from a 4096-sample Cycles bake, 1 read 1.84 %); else the defaults
+    but the device and supersample 2 (issue 13's setting)."""
     if args.passes != "direct":
         return {"device": args.device}
-    return {"method": "direct", "light_samples": args.light_samples[0],
+    return {"method": "direct", "light_samples": args.light_samples[0], "supersample": 1,
             "light_selection": args.light_selections[0], "device": args.device}
 
 
