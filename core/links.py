@@ -86,6 +86,10 @@ JENSEN = 1.2
 # threshold (no rays) must fit the budget over this margin.
 RAISE = 2.0
 TRIAL_MARGIN = 1.5
+# Candidates per oracle thread on the CPU: a thread starts by copying the kernel's arguments (the
+# tree, element and sampling structs, some kilobytes; measured 55 ns, more than a typical
+# candidate's work), so each takes a run of candidates. On a GPU one each.
+GRAIN = 64
 # No estimate of pair_need exceeds this: at this threshold every pair of distinct nodes links.
 COARSEST = 2.0
 PI = math.pi
@@ -461,8 +465,8 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 
 
 @wp.kernel
-def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
-                   s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
+def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32),
+                   t: Nodes, s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
                    weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
                    seed: int, sides: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
                    link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
@@ -470,75 +474,77 @@ def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype
     """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
     a link, a link's (transfer to a, to b, normaliser to a, to b) and the visible fractions of
     its transfers; the rays it traced in ``traced[i]`` (Warp's CPU atomics are not atomic across
-    our threads, so no shared counter)."""
-    i = wp.tid() + offset
-    a = qa[i]
-    b = qb[i]
-    dec = DROP
-    count = int(0)
-    out = wp.vec4(0.0)
-    seen = wp.vec3(1.0)
-    ray_count = int(0)
-    leaf_a = t.descend[a] < 0
-    leaf_b = t.descend[b] < 0
-    if t.area[a] > 0.0 and t.area[b] > 0.0:
-        if a == b:
-            if not leaf_a:
-                r = children(t, a)
-                k = r[1] - r[0]
-                dec = SPLIT_SELF
-                count = k * (k + 1) // 2
-        elif leaf_a and leaf_b:
-            ea = t.element[a]
-            eb = t.element[b]
-            f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
-            f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
-            if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
-                dec = LINK
-                v = float(1.0)
-                if visibility != 0 and rays > 0:
-                    v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
-                    ray_count = rays
-                out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
-                seen = wp.vec3(v, v, v)
-        else:
-            need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
-                             t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b], sides)
-            if need[2] > 0.0:
-                w = float(1.0)
-                if weighted != 0:
-                    w = wp.max(weight[a], weight[b])
-                need_a = need[0] * w
-                need_b = need[1] * w
-                largest = wp.max(need_a, need_b)
-                split = largest > threshold
-                if not split:
-                    if rays > 0:
-                        out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides)
-                        if visibility != 0:
-                            ray_count = rays
-                        split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
-                    else:
-                        f_ab = centre_ff(t, s, a, b, sides)
-                        f_ba = centre_ff(t, s, b, a, sides)
-                        out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
-                    if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
-                        dec = LINK
-                if split:
-                    if leaf_a or (not leaf_b and need_b >= need_a):
-                        dec = SPLIT_B
-                        r = children(t, b)
-                        count = r[1] - r[0]
-                    else:
-                        dec = SPLIT_A
-                        r = children(t, a)
-                        count = r[1] - r[0]
-    decision[i] = dec
-    out_count[i] = count
-    link_count[i] = int(dec == LINK)
-    values[i] = out
-    visible_out[i] = wp.vec2(seen[0], seen[1])
-    traced[i] = ray_count
+    our threads, so no shared counter). Each thread takes ``grain`` consecutive candidates of the
+    ``size`` queued."""
+    first = (wp.tid() + offset) * grain
+    for i in range(first, wp.min(first + grain, size)):
+        a = qa[i]
+        b = qb[i]
+        dec = DROP
+        count = int(0)
+        out = wp.vec4(0.0)
+        seen = wp.vec3(1.0)
+        ray_count = int(0)
+        leaf_a = t.descend[a] < 0
+        leaf_b = t.descend[b] < 0
+        if t.area[a] > 0.0 and t.area[b] > 0.0:
+            if a == b:
+                if not leaf_a:
+                    r = children(t, a)
+                    k = r[1] - r[0]
+                    dec = SPLIT_SELF
+                    count = k * (k + 1) // 2
+            elif leaf_a and leaf_b:
+                ea = t.element[a]
+                eb = t.element[b]
+                f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
+                f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
+                if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
+                    dec = LINK
+                    v = float(1.0)
+                    if visibility != 0 and rays > 0:
+                        v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
+                        ray_count = rays
+                    out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
+                    seen = wp.vec3(v, v, v)
+            else:
+                need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
+                                 t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b], sides)
+                if need[2] > 0.0:
+                    w = float(1.0)
+                    if weighted != 0:
+                        w = wp.max(weight[a], weight[b])
+                    need_a = need[0] * w
+                    need_b = need[1] * w
+                    largest = wp.max(need_a, need_b)
+                    split = largest > threshold
+                    if not split:
+                        if rays > 0:
+                            out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides)
+                            if visibility != 0:
+                                ray_count = rays
+                            split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
+                        else:
+                            f_ab = centre_ff(t, s, a, b, sides)
+                            f_ba = centre_ff(t, s, b, a, sides)
+                            out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
+                        if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
+                            dec = LINK
+                    if split:
+                        if leaf_a or (not leaf_b and need_b >= need_a):
+                            dec = SPLIT_B
+                            r = children(t, b)
+                            count = r[1] - r[0]
+                        else:
+                            dec = SPLIT_A
+                            r = children(t, a)
+                            count = r[1] - r[0]
+        decision[i] = dec
+        out_count[i] = count
+        link_count[i] = int(dec == LINK)
+        values[i] = out
+        visible_out[i] = wp.vec2(seen[0], seen[1])
+        traced[i] = ray_count
 
 
 @wp.kernel
@@ -704,6 +710,7 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     if weight is None:
         weight = wp.zeros(1, dtype=wp.float32, device=d)
     root = _canonical_root(tree)
+    grain = 1 if dev.is_cuda else GRAIN
     qa = wp.full(1, root, dtype=wp.int32, device=d)
     qb = wp.full(1, root, dtype=wp.int32, device=d)
     parts, total, rounds = [], 0, 0
@@ -715,8 +722,8 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         values = wp.empty(q, dtype=wp.vec4, device=d)
         seen = wp.empty(q, dtype=wp.vec2, device=d)
         rays = wp.empty(q, dtype=wp.int32, device=d)
-        device_mod.launch(_oracle_kernel, q,
-                          [qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
+        device_mod.launch(_oracle_kernel, -(-q // grain),
+                          [grain, q, qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
                            int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
                            out_count, link_count, values, seen, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
