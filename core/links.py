@@ -346,12 +346,29 @@ def _sample_terms(f: float, w: float, hit: float) -> wp.vec4:
 
 
 @wp.func
+def _sample_pair(t: Nodes, sm: Sampling, a: int, b: int, k: int, rays: int, shift: int, ua: float,
+                 ub: float) -> wp.vec2i:
+    """The leaves (node indices) of sample k of ``rays`` of link (a, b): from stratum k of a's
+    leaves and stratum k + shift (cyclic) of b's, jittered by ua, ub ∈ [0, 1)."""
+    return wp.vec2i(sample_leaf(t, sm, a, (float(k) + ua) / float(rays)),
+                    sample_leaf(t, sm, b, (float((k + shift) % rays) + ub) / float(rays)))
+
+
+@wp.func
 def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: int, visibility: int,
-                     seed: int, sides: int):
+                     seed: int, sides: int, probe: bool):
     """Link (a, b) from ``rays`` sample pairs (see the module docstring): ((transfer to a, to b,
     normaliser to a, to b), (visible fraction of the transfer to a, to b, plain visible fraction
-    of the rays)). The normalisers (``centroid_ff`` of the sender from the receiving samples) are
-    averaged over the receiving end by area, as the transfer is."""
+    of the rays), rays traced). The normalisers (``centroid_ff`` of the sender from the receiving
+    samples) are averaged over the receiving end by area, as the transfer is.
+
+    Only the rays that can change the link are traced. ``probe``: the caller splits the pair when
+    the plain fraction is strictly between 0 and 1; then the rays stop at the first sample that
+    makes it so (the values returned are then partial: the pair is no link). Otherwise a sample
+    whose form factors are 0 both ways adds nothing to the transfers, whatever its ray finds; its
+    ray is traced only where the plain fraction stands for a direction's visible fraction (that
+    direction's unoccluded transfer is 0) of a pair that links. The rays traced and the values
+    returned are those of tracing every ray."""
     state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
     shift = int(wp.randf(state) * float(rays))
     # per direction (a receives from b, b from a): ``_sample_terms`` summed over the samples
@@ -361,10 +378,15 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
     c_ab = float(0.0)
     r_b = float(0.0)
     c_ba = float(0.0)
-    seen = float(0.0)
+    seen = float(0.0)  # the rays' hits, a sample whose ray is skipped counted as one
+    traced = int(0)
+    skipped = int(0)
     for k in range(rays):
-        la = sample_leaf(t, sm, a, (float(k) + wp.randf(state)) / float(rays))
-        lb = sample_leaf(t, sm, b, (float((k + shift) % rays) + wp.randf(state)) / float(rays))
+        ua = wp.randf(state)
+        ub = wp.randf(state)
+        pair = _sample_pair(t, sm, a, b, k, rays, shift, ua, ub)
+        la = pair[0]
+        lb = pair[1]
         # each end's density relative to area: ∝ glow + floor on a cluster, one point on a leaf
         da = float(1.0)
         db = float(1.0)
@@ -374,12 +396,19 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
             db = sm.glow[lb] + sm.floor
         ea = t.element[la]
         eb = t.element[lb]
-        hit = float(1.0)
-        if visibility != 0:
-            hit = element_ray(s, ea, eb, wp.randf(state), wp.randf(state), wp.randf(state))
-        seen += hit
         f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
         f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
+        hit = float(1.0)
+        if visibility != 0:
+            u0 = wp.randf(state)
+            u1 = wp.randf(state)
+            u2 = wp.randf(state)
+            if probe or f_ab > 0.0 or f_ba > 0.0:
+                hit = element_ray(s, ea, eb, u0, u1, u2)
+                traced += 1
+            else:
+                skipped += 1
+        seen += hit
         s_ab += _sample_terms(f_ab / s.area[eb], sm.glow[lb] / (da * db), hit)
         s_ba += _sample_terms(f_ba / s.area[ea], sm.glow[la] / (da * db), hit)
         # the centroid form factors: a leaf's is the element form factor just evaluated
@@ -391,6 +420,8 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
         c_ab += f_ab / da
         r_b += 1.0 / db
         c_ba += f_ba / db
+        if probe and seen > 0.0 and seen < float(k + 1):  # a hit and a miss: the pair is split
+            break
     t_ab = s_ab[3] / float(rays)
     u_ab = s_ab[2]
     if s_ab[0] > 0.0:
@@ -401,10 +432,27 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
     if s_ba[0] > 0.0:
         t_ba = s_ba[1] / s_ba[0]
         u_ba = s_ba[2] / s_ba[0]
+    out = wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
+                  _normaliser(u_ba * t.area[a], c_ba / r_b))
+    if skipped > 0 and (not (u_ab > 0.0) or not (u_ba > 0.0)) and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
+        # ``_fraction`` falls back on the plain fraction: the skipped samples' rays, drawn again
+        state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
+        wp.randf(state)
+        for k in range(rays):
+            ua = wp.randf(state)
+            ub = wp.randf(state)
+            pair = _sample_pair(t, sm, a, b, k, rays, shift, ua, ub)
+            u0 = wp.randf(state)
+            u1 = wp.randf(state)
+            u2 = wp.randf(state)
+            ea = t.element[pair[0]]
+            eb = t.element[pair[1]]
+            if not (sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides) > 0.0
+                    or sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides) > 0.0):
+                seen += element_ray(s, ea, eb, u0, u1, u2) - 1.0
+                traced += 1
     plain = seen / float(rays)
-    return (wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
-                    _normaliser(u_ba * t.area[a], c_ba / r_b)),
-            wp.vec3(_fraction(t_ab, u_ab, plain), _fraction(t_ba, u_ba, plain), plain))
+    return out, wp.vec3(_fraction(t_ab, u_ab, plain), _fraction(t_ba, u_ba, plain), plain), traced
 
 
 @wp.func
@@ -520,10 +568,10 @@ def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int
                     split = largest > threshold
                     if not split:
                         if rays > 0:
-                            out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides)
-                            if visibility != 0:
-                                ray_count = rays
-                            split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
+                            probe = largest > PARTIAL * threshold
+                            out, seen, ray_count = sampled_transfer(t, s, sm, a, b, rays, visibility, seed,
+                                                                    sides, probe)
+                            split = probe and seen[2] > 0.0 and seen[2] < 1.0
                         else:
                             f_ab = centre_ff(t, s, a, b, sides)
                             f_ba = centre_ff(t, s, b, a, sides)
