@@ -367,8 +367,8 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
     makes it so (the values returned are then partial: the pair is no link). Otherwise a sample
     whose form factors are 0 both ways adds nothing to the transfers, whatever its ray finds; its
     ray is traced only where the plain fraction stands for a direction's visible fraction (that
-    direction's unoccluded transfer is 0) of a pair that links. The rays traced and the values
-    returned are those of tracing every ray."""
+    direction's unoccluded transfer is 0) of a pair that links. Either way the oracle decides, and
+    a link carries, what tracing every ray gives."""
     state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
     shift = int(wp.randf(state) * float(rays))
     # per direction (a receives from b, b from a): ``_sample_terms`` summed over the samples
