@@ -677,6 +677,69 @@ def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
             out.offsets[q] = count
 
 
+@wp.kernel
+def _count_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
+                  lb: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)):
+    """Run t (links t·run … t·run + run − 1): how many of its directed links each node receives,
+    in row t of counts (int32[runs·m], no other thread writes it)."""
+    t = wp.tid() + offset
+    row = t * m
+    for i in range(t * run, wp.min(t * run + run, pairs)):
+        counts[row + la[i]] += 1
+        counts[row + lb[i]] += 1
+
+
+@wp.kernel
+def _total_kernel(offset: int, runs: int, m: int, counts: wp.array(dtype=wp.int32),
+                  totals: wp.array(dtype=wp.int32)):
+    """Node r: the directed links it receives, over all runs."""
+    r = wp.tid() + offset
+    total = int(0)
+    for t in range(runs):
+        total += counts[t * m + r]
+    totals[r] = total
+
+
+@wp.kernel
+def _cursor_kernel(offset: int, runs: int, m: int, offsets: wp.array(dtype=wp.int32),
+                   counts: wp.array(dtype=wp.int32)):
+    """Node r: where run t's first link to it goes (after those of the runs before), in place of
+    run t's count."""
+    r = wp.tid() + offset
+    at = offsets[r]
+    for t in range(runs):
+        k = counts[t * m + r]
+        counts[t * m + r] = at
+        at += k
+
+
+@wp.kernel
+def _place_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
+                  lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
+                  lvisible: wp.array(dtype=wp.vec2), cursor: wp.array(dtype=wp.int32), out: LinkSet):
+    """Run t's directed links, in order, at their receivers' next places (``cursor``: row t of
+    ``_cursor_kernel``'s places, advanced as they fill): sender, transfer, normaliser, visible."""
+    t = wp.tid() + offset
+    row = t * m
+    for i in range(t * run, wp.min(t * run + run, pairs)):
+        a = la[i]
+        b = lb[i]
+        x = lvalues[i]
+        v = lvisible[i]
+        j = cursor[row + a]
+        cursor[row + a] = j + 1
+        out.sender[j] = b
+        out.transfer[j] = x[0]
+        out.form_factor[j] = x[2]
+        out.visible[j] = wp.uint8(wp.int32(v[0] * 255.0 + 0.5))
+        j = cursor[row + b]
+        cursor[row + b] = j + 1
+        out.sender[j] = a
+        out.transfer[j] = x[1]
+        out.form_factor[j] = x[3]
+        out.visible[j] = wp.uint8(wp.int32(v[1] * 255.0 + 0.5))
+
+
 def cones(tree) -> wp.array:
     """vec2[m]: (cos, sin) of each node's normal-cone half-angle over its subtree (leaves (1, 0)),
     one launch per level."""
@@ -805,6 +868,45 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     return (*out, rounds)
 
 
+def _by_receiver(dev, n: int, la: wp.array, lb: wp.array, lvalues: wp.array, lvisible: wp.array) -> LinkSet:
+    """Both directions of the links la–lb (int32[p] node pairs, vec4[p] values, vec2[p] visible
+    fractions; see ``_scatter_kernel``) sorted by receiver into the ``LinkSet`` over n nodes; a
+    receiver's links in the order of the directed links, 2i (receiver la[i]) and 2i + 1 (lb[i]).
+
+    On a GPU a radix sort of the directed links by receiver. On the CPU a stable counting sort,
+    one run of the links per thread: each thread counts its run's links per receiver, the counts
+    give each run's place in every row, and each thread places its run there (measured on a 10 k
+    room: 0.015–0.019 CPU s against 0.042–0.048 for the radix sort, same links)."""
+    d = dev.name
+    pairs = la.size
+    count = 2 * pairs
+    out = LinkSet()
+    out.offsets = wp.zeros(n + 1, dtype=wp.int32, device=d)
+    out.sender = wp.empty(max(count, 1), dtype=wp.int32, device=d)
+    out.transfer = wp.empty(max(count, 1), dtype=wp.float32, device=d)
+    out.form_factor = wp.empty(max(count, 1), dtype=wp.float32, device=d)
+    out.visible = wp.empty(max(count, 1), dtype=wp.uint8, device=d)
+    if dev.is_cuda:
+        keys = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
+        values = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
+        device_mod.launch(_directed_kernel, pairs, [la, lb, keys, values], dev)
+        with device_mod.section("links.sort", dev):
+            wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
+        device_mod.launch(_csr_kernel, count, [count, n, keys, values, la, lb, lvalues, lvisible, out], dev)
+        return out
+    runs = dev.threads
+    run = max(1, -(-pairs // runs))
+    counts = wp.zeros(runs * n, dtype=wp.int32, device=d)  # [run, receiver], then where each run's links go
+    totals = wp.zeros(n + 1, dtype=wp.int32, device=d)
+    device_mod.launch(_count_kernel, runs, [run, pairs, n, la, lb, counts], dev)
+    device_mod.launch(_total_kernel, n, [runs, n, counts, totals], dev)
+    with device_mod.section("links.sort", dev):
+        wp.utils.array_scan(totals, out.offsets, inclusive=False)
+    device_mod.launch(_cursor_kernel, n, [runs, n, out.offsets, counts], dev)
+    device_mod.launch(_place_kernel, runs, [run, pairs, n, la, lb, lvalues, lvisible, counts, out], dev)
+    return out
+
+
 def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     """The links of ``problem``'s tree chosen by ``oracle``. ``radiance`` (float32[n,3] per
     element, a first estimate; None: geometric only) weights the oracle (``weights``) and draws
@@ -839,20 +941,7 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
                     f"threshold {oracle.threshold:g}: {2 * pairs} links made at threshold "
                     f"{threshold:g} (coarser, less accurate); raise --link-memory for the finer links")
 
-    n = tree.count
-    count = 2 * pairs
-    keys = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
-    values = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
-    device_mod.launch(_directed_kernel, pairs, [la, lb, keys, values], dev)
-    with device_mod.section("links.sort", dev):
-        wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
-    out = LinkSet()
-    out.offsets = wp.zeros(n + 1, dtype=wp.int32, device=d)
-    out.sender = wp.empty(max(count, 1), dtype=wp.int32, device=d)
-    out.transfer = wp.empty(max(count, 1), dtype=wp.float32, device=d)
-    out.form_factor = wp.empty(max(count, 1), dtype=wp.float32, device=d)
-    out.visible = wp.empty(max(count, 1), dtype=wp.uint8, device=d)
-    device_mod.launch(_csr_kernel, count, [count, n, keys, values, la, lb, lvalues, lvisible, out], dev)
+    out = _by_receiver(dev, tree.count, la, lb, lvalues, lvisible)
     if dev.is_cuda:
         wp.synchronize_device(d)
     return Links(set=out, pairs=pairs, threshold=threshold, rounds=rounds,
