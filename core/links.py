@@ -35,8 +35,9 @@ antiradiance crosses surfaces, also for ``sides=2``: pairs whose faces see each 
 link (even with no transfer to either front: what arrives at a back goes on through), and
 transfers are to both faces of the sender.
 
-Finally both directions are sorted by receiver (``wp.utils.radix_sort_pairs``) into CSR
-(``LinkSet``): a gather is one thread per receiver node over a contiguous range, no atomics.
+Finally both directions are sorted by receiver into CSR (``LinkSet``; ``wp.utils.radix_sort_pairs``
+on a GPU, a counting sort on the CPU): a gather is one thread per receiver node over a contiguous
+range, no atomics.
 
 Memory: the links and candidates in flight are held to ``budget`` bytes (BYTES_PER_LINK per link
 at the peak, while sorting; BYTES_PER_CANDIDATE per queued pair). A scene that would exceed it is
