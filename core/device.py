@@ -261,7 +261,7 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
             sub = -(-count // threads)
             futures = [pool.submit(wp.launch, kernel, dim=sub, inputs=[start + s, *inputs], device=device.name)
                        for s in range(0, count - sub, sub)]
-            last = (len(futures)) * sub
+            last = len(futures) * sub
             try:
                 wp.launch(kernel, dim=count - last, inputs=[start + last, *inputs], device=device.name)
             finally:

@@ -514,10 +514,11 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 
 
 @wp.kernel
-def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32),
-                   t: Nodes, s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
-                   weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
-                   seed: int, sides: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
+def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
+                   qb: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
+                   cone: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
+                   weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
+                   decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
                    link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
                    visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int32)):
     """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
@@ -678,69 +679,6 @@ def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
             out.offsets[q] = count
 
 
-@wp.kernel
-def _count_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
-                  lb: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)):
-    """Run t (links t·run … t·run + run − 1): how many of its directed links each node receives,
-    in row t of counts (int32[runs·m], no other thread writes it)."""
-    t = wp.tid() + offset
-    row = t * m
-    for i in range(t * run, wp.min(t * run + run, pairs)):
-        counts[row + la[i]] += 1
-        counts[row + lb[i]] += 1
-
-
-@wp.kernel
-def _total_kernel(offset: int, runs: int, m: int, counts: wp.array(dtype=wp.int32),
-                  totals: wp.array(dtype=wp.int32)):
-    """Node r: the directed links it receives, over all runs."""
-    r = wp.tid() + offset
-    total = int(0)
-    for t in range(runs):
-        total += counts[t * m + r]
-    totals[r] = total
-
-
-@wp.kernel
-def _cursor_kernel(offset: int, runs: int, m: int, offsets: wp.array(dtype=wp.int32),
-                   counts: wp.array(dtype=wp.int32)):
-    """Node r: where run t's first link to it goes (after those of the runs before), in place of
-    run t's count."""
-    r = wp.tid() + offset
-    at = offsets[r]
-    for t in range(runs):
-        k = counts[t * m + r]
-        counts[t * m + r] = at
-        at += k
-
-
-@wp.kernel
-def _place_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
-                  lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
-                  lvisible: wp.array(dtype=wp.vec2), cursor: wp.array(dtype=wp.int32), out: LinkSet):
-    """Run t's directed links, in order, at their receivers' next places (``cursor``: row t of
-    ``_cursor_kernel``'s places, advanced as they fill): sender, transfer, normaliser, visible."""
-    t = wp.tid() + offset
-    row = t * m
-    for i in range(t * run, wp.min(t * run + run, pairs)):
-        a = la[i]
-        b = lb[i]
-        x = lvalues[i]
-        v = lvisible[i]
-        j = cursor[row + a]
-        cursor[row + a] = j + 1
-        out.sender[j] = b
-        out.transfer[j] = x[0]
-        out.form_factor[j] = x[2]
-        out.visible[j] = wp.uint8(wp.int32(v[0] * 255.0 + 0.5))
-        j = cursor[row + b]
-        cursor[row + b] = j + 1
-        out.sender[j] = a
-        out.transfer[j] = x[1]
-        out.form_factor[j] = x[3]
-        out.visible[j] = wp.uint8(wp.int32(v[1] * 255.0 + 0.5))
-
-
 def cones(tree) -> wp.array:
     """vec2[m]: (cos, sin) of each node's normal-cone half-angle over its subtree (leaves (1, 0)),
     one launch per level."""
@@ -822,7 +760,7 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     if weight is None:
         weight = wp.zeros(1, dtype=wp.float32, device=d)
     root = _canonical_root(tree)
-    grain = 1 if dev.is_cuda else GRAIN
+    grain = 1 if dev.is_cuda else GRAIN  # candidates per CPU thread (GRAIN)
     qa = wp.full(1, root, dtype=wp.int32, device=d)
     qb = wp.full(1, root, dtype=wp.int32, device=d)
     parts, total, rounds = [], 0, 0
@@ -835,9 +773,9 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         seen = wp.empty(q, dtype=wp.vec2, device=d)
         rays = wp.empty(q, dtype=wp.int32, device=d)
         device_mod.launch(_oracle_kernel, -(-q // grain),
-                          [grain, q, qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
-                           int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
-                           out_count, link_count, values, seen, rays],
+                          [grain, q, qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted),
+                           weight, int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919,
+                           int(oracle.sides), decision, out_count, link_count, values, seen, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
         with device_mod.section("links.scan", dev):
             if oracle.visibility and oracle.rays > 0:
@@ -867,6 +805,69 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
                 wp.copy(dst, src, dest_offset=start, count=src.size)
             start += part[0].size
     return (*out, rounds)
+
+
+@wp.kernel
+def _count_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
+                  lb: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)):
+    """Run t (links t·run … t·run + run − 1): how many of its directed links each node receives,
+    in row t of counts (int32[runs·m], no other thread writes it)."""
+    t = wp.tid() + offset
+    row = t * m
+    for i in range(t * run, wp.min(t * run + run, pairs)):
+        counts[row + la[i]] += 1
+        counts[row + lb[i]] += 1
+
+
+@wp.kernel
+def _total_kernel(offset: int, runs: int, m: int, counts: wp.array(dtype=wp.int32),
+                  totals: wp.array(dtype=wp.int32)):
+    """Node r: the directed links it receives, over all runs."""
+    r = wp.tid() + offset
+    total = int(0)
+    for t in range(runs):
+        total += counts[t * m + r]
+    totals[r] = total
+
+
+@wp.kernel
+def _cursor_kernel(offset: int, runs: int, m: int, offsets: wp.array(dtype=wp.int32),
+                   counts: wp.array(dtype=wp.int32)):
+    """Node r: where run t's first link to it goes (after those of the runs before), in place of
+    run t's count."""
+    r = wp.tid() + offset
+    at = offsets[r]
+    for t in range(runs):
+        k = counts[t * m + r]
+        counts[t * m + r] = at
+        at += k
+
+
+@wp.kernel
+def _place_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
+                  lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
+                  lvisible: wp.array(dtype=wp.vec2), cursor: wp.array(dtype=wp.int32), out: LinkSet):
+    """Run t's directed links, in order, at their receivers' next places (``cursor``: row t of
+    ``_cursor_kernel``'s places, advanced as they fill): sender, transfer, normaliser, visible."""
+    t = wp.tid() + offset
+    row = t * m
+    for i in range(t * run, wp.min(t * run + run, pairs)):
+        a = la[i]
+        b = lb[i]
+        x = lvalues[i]
+        v = lvisible[i]
+        j = cursor[row + a]
+        cursor[row + a] = j + 1
+        out.sender[j] = b
+        out.transfer[j] = x[0]
+        out.form_factor[j] = x[2]
+        out.visible[j] = wp.uint8(wp.int32(v[0] * 255.0 + 0.5))
+        j = cursor[row + b]
+        cursor[row + b] = j + 1
+        out.sender[j] = a
+        out.transfer[j] = x[1]
+        out.form_factor[j] = x[3]
+        out.visible[j] = wp.uint8(wp.int32(v[1] * 255.0 + 0.5))
 
 
 def _by_receiver(dev, n: int, la: wp.array, lb: wp.array, lvalues: wp.array, lvisible: wp.array) -> LinkSet:
