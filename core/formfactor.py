@@ -33,14 +33,20 @@ def arc_term(a: wp.vec3, b: wp.vec3, n: wp.vec3) -> float:
 
 
 @wp.func
-def clip_edge_term(a: wp.vec3, b: wp.vec3, n: wp.vec3):
-    """Contour term of edge a→b clipped to the horizon of normal n (a, b relative to the receiver).
+def horizon_height(a: wp.vec3, n: wp.vec3) -> float:
+    """How far point a (relative to the receiver) lies above the horizon of normal n, less
+    HORIZON_EPS of its distance: > 0 counts as above."""
+    return wp.dot(a, n) - HORIZON_EPS * wp.length(a)
+
+
+@wp.func
+def clip_edge_term(a: wp.vec3, b: wp.vec3, ha: float, hb: float, n: wp.vec3):
+    """Contour term of edge a→b clipped to the horizon of normal n (a, b relative to the receiver;
+    ha, hb their ``horizon_height``).
 
     Returns (term, event, point): event 1 when the edge leaves the upper hemisphere at ``point``,
     2 when it enters there, 0 otherwise.
     """
-    ha = wp.dot(a, n) - HORIZON_EPS * wp.length(a)
-    hb = wp.dot(b, n) - HORIZON_EPS * wp.length(b)
     term = float(0.0)
     event = int(0)
     x = wp.vec3(0.0)
@@ -169,9 +175,16 @@ def outline_ff(p: wp.vec3, n: wp.vec3, shape: int, count: int, a: wp.vec3, u: wp
     entry_pt = wp.vec3(0.0)
     has_exit = int(0)
     has_entry = int(0)
+    # each corner relative to p, with its height over the horizon, is made once and passed on to
+    # the next edge (the last edge's end, corner nv, is corner 0 again)
+    c0 = outline_point(shape, 0, count, a, u, v, hx, hy) - p
+    h0 = horizon_height(c0, n)
     for k in range(nv):
-        t, e, x = clip_edge_term(outline_point(shape, k, count, a, u, v, hx, hy) - p,
-                                 outline_point(shape, k + 1, count, a, u, v, hx, hy) - p, n)
+        c1 = outline_point(shape, k + 1, count, a, u, v, hx, hy) - p
+        h1 = horizon_height(c1, n)
+        t, e, x = clip_edge_term(c0, c1, h0, h1, n)
+        c0 = c1
+        h0 = h1
         s += t
         if e == 1:
             exit_pt = x

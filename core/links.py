@@ -35,8 +35,9 @@ antiradiance crosses surfaces, also for ``sides=2``: pairs whose faces see each 
 link (even with no transfer to either front: what arrives at a back goes on through), and
 transfers are to both faces of the sender.
 
-Finally both directions are sorted by receiver (``wp.utils.radix_sort_pairs``) into CSR
-(``LinkSet``): a gather is one thread per receiver node over a contiguous range, no atomics.
+Finally both directions are sorted by receiver into CSR (``LinkSet``; ``wp.utils.radix_sort_pairs``
+on a GPU, a counting sort on the CPU): a gather is one thread per receiver node over a contiguous
+range, no atomics.
 
 Memory: the links and candidates in flight are held to ``budget`` bytes (BYTES_PER_LINK per link
 at the peak, while sorting; BYTES_PER_CANDIDATE per queued pair). A scene that would exceed it is
@@ -86,6 +87,11 @@ JENSEN = 1.2
 # threshold (no rays) must fit the budget over this margin.
 RAISE = 2.0
 TRIAL_MARGIN = 1.5
+# Candidates per oracle thread on the CPU: a thread starts by copying the kernel's arguments (the
+# tree, element and sampling structs, some kilobytes), more than a typical candidate's work, so each
+# takes a run of candidates (measured: the 10 k room's 948 k candidates, 0.27 → 0.18 CPU s). On a
+# GPU one each.
+GRAIN = 64
 # No estimate of pair_need exceeds this: at this threshold every pair of distinct nodes links.
 COARSEST = 2.0
 PI = math.pi
@@ -342,12 +348,29 @@ def _sample_terms(f: float, w: float, hit: float) -> wp.vec4:
 
 
 @wp.func
+def _sample_pair(t: Nodes, sm: Sampling, a: int, b: int, k: int, rays: int, shift: int, ua: float,
+                 ub: float) -> wp.vec2i:
+    """The leaves (node indices) of sample k of ``rays`` of link (a, b): from stratum k of a's
+    leaves and stratum k + shift (cyclic) of b's, jittered by ua, ub ∈ [0, 1)."""
+    return wp.vec2i(sample_leaf(t, sm, a, (float(k) + ua) / float(rays)),
+                    sample_leaf(t, sm, b, (float((k + shift) % rays) + ub) / float(rays)))
+
+
+@wp.func
 def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: int, visibility: int,
-                     seed: int, sides: int):
+                     seed: int, sides: int, probe: bool):
     """Link (a, b) from ``rays`` sample pairs (see the module docstring): ((transfer to a, to b,
     normaliser to a, to b), (visible fraction of the transfer to a, to b, plain visible fraction
-    of the rays)). The normalisers (``centroid_ff`` of the sender from the receiving samples) are
-    averaged over the receiving end by area, as the transfer is."""
+    of the rays), rays traced). The normalisers (``centroid_ff`` of the sender from the receiving
+    samples) are averaged over the receiving end by area, as the transfer is.
+
+    Only the rays that can change the link are traced. ``probe``: the caller splits the pair when
+    the plain fraction is strictly between 0 and 1; then the rays stop at the first sample that
+    makes it so (the values returned are then partial: the pair is no link). Otherwise a sample
+    whose form factors are 0 both ways adds nothing to the transfers, whatever its ray finds; its
+    ray is traced only where the plain fraction stands for a direction's visible fraction (that
+    direction's unoccluded transfer is 0) of a pair that links. Either way the oracle decides, and
+    a link carries, what tracing every ray gives."""
     state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
     shift = int(wp.randf(state) * float(rays))
     # per direction (a receives from b, b from a): ``_sample_terms`` summed over the samples
@@ -357,10 +380,15 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
     c_ab = float(0.0)
     r_b = float(0.0)
     c_ba = float(0.0)
-    seen = float(0.0)
+    seen = float(0.0)  # the rays' hits, a sample whose ray is skipped counted as one
+    traced = int(0)
+    skipped = int(0)
     for k in range(rays):
-        la = sample_leaf(t, sm, a, (float(k) + wp.randf(state)) / float(rays))
-        lb = sample_leaf(t, sm, b, (float((k + shift) % rays) + wp.randf(state)) / float(rays))
+        ua = wp.randf(state)
+        ub = wp.randf(state)
+        pair = _sample_pair(t, sm, a, b, k, rays, shift, ua, ub)
+        la = pair[0]
+        lb = pair[1]
         # each end's density relative to area: ∝ glow + floor on a cluster, one point on a leaf
         da = float(1.0)
         db = float(1.0)
@@ -370,12 +398,19 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
             db = sm.glow[lb] + sm.floor
         ea = t.element[la]
         eb = t.element[lb]
-        hit = float(1.0)
-        if visibility != 0:
-            hit = element_ray(s, ea, eb, wp.randf(state), wp.randf(state), wp.randf(state))
-        seen += hit
         f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
         f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
+        hit = float(1.0)
+        if visibility != 0:
+            u0 = wp.randf(state)
+            u1 = wp.randf(state)
+            u2 = wp.randf(state)
+            if probe or f_ab > 0.0 or f_ba > 0.0:
+                hit = element_ray(s, ea, eb, u0, u1, u2)
+                traced += 1
+            else:
+                skipped += 1
+        seen += hit
         s_ab += _sample_terms(f_ab / s.area[eb], sm.glow[lb] / (da * db), hit)
         s_ba += _sample_terms(f_ba / s.area[ea], sm.glow[la] / (da * db), hit)
         # the centroid form factors: a leaf's is the element form factor just evaluated
@@ -387,6 +422,8 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
         c_ab += f_ab / da
         r_b += 1.0 / db
         c_ba += f_ba / db
+        if probe and seen > 0.0 and seen < float(k + 1):  # a hit and a miss: the pair is split
+            break
     t_ab = s_ab[3] / float(rays)
     u_ab = s_ab[2]
     if s_ab[0] > 0.0:
@@ -397,10 +434,27 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
     if s_ba[0] > 0.0:
         t_ba = s_ba[1] / s_ba[0]
         u_ba = s_ba[2] / s_ba[0]
+    out = wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
+                  _normaliser(u_ba * t.area[a], c_ba / r_b))
+    if skipped > 0 and (not (u_ab > 0.0) or not (u_ba > 0.0)) and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
+        # ``_fraction`` falls back on the plain fraction: the skipped samples' rays, drawn again
+        state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
+        wp.randf(state)
+        for k in range(rays):
+            ua = wp.randf(state)
+            ub = wp.randf(state)
+            pair = _sample_pair(t, sm, a, b, k, rays, shift, ua, ub)
+            u0 = wp.randf(state)
+            u1 = wp.randf(state)
+            u2 = wp.randf(state)
+            ea = t.element[pair[0]]
+            eb = t.element[pair[1]]
+            if not (sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides) > 0.0
+                    or sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides) > 0.0):
+                seen += element_ray(s, ea, eb, u0, u1, u2) - 1.0
+                traced += 1
     plain = seen / float(rays)
-    return (wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
-                    _normaliser(u_ba * t.area[a], c_ba / r_b)),
-            wp.vec3(_fraction(t_ab, u_ab, plain), _fraction(t_ba, u_ba, plain), plain))
+    return out, wp.vec3(_fraction(t_ab, u_ab, plain), _fraction(t_ba, u_ba, plain), plain), traced
 
 
 @wp.func
@@ -461,84 +515,87 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 
 
 @wp.kernel
-def _oracle_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
-                   s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec2), threshold: float,
-                   weighted: int, weight: wp.array(dtype=wp.float32), rays: int, visibility: int,
-                   seed: int, sides: int, decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
+def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
+                   qb: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
+                   cone: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
+                   weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
+                   decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
                    link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
                    visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int32)):
     """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
     a link, a link's (transfer to a, to b, normaliser to a, to b) and the visible fractions of
     its transfers; the rays it traced in ``traced[i]`` (Warp's CPU atomics are not atomic across
-    our threads, so no shared counter)."""
-    i = wp.tid() + offset
-    a = qa[i]
-    b = qb[i]
-    dec = DROP
-    count = int(0)
-    out = wp.vec4(0.0)
-    seen = wp.vec3(1.0)
-    ray_count = int(0)
-    leaf_a = t.descend[a] < 0
-    leaf_b = t.descend[b] < 0
-    if t.area[a] > 0.0 and t.area[b] > 0.0:
-        if a == b:
-            if not leaf_a:
-                r = children(t, a)
-                k = r[1] - r[0]
-                dec = SPLIT_SELF
-                count = k * (k + 1) // 2
-        elif leaf_a and leaf_b:
-            ea = t.element[a]
-            eb = t.element[b]
-            f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
-            f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
-            if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
-                dec = LINK
-                v = float(1.0)
-                if visibility != 0 and rays > 0:
-                    v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
-                    ray_count = rays
-                out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
-                seen = wp.vec3(v, v, v)
-        else:
-            need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
-                             t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b], sides)
-            if need[2] > 0.0:
-                w = float(1.0)
-                if weighted != 0:
-                    w = wp.max(weight[a], weight[b])
-                need_a = need[0] * w
-                need_b = need[1] * w
-                largest = wp.max(need_a, need_b)
-                split = largest > threshold
-                if not split:
-                    if rays > 0:
-                        out, seen = sampled_transfer(t, s, sm, a, b, rays, visibility, seed, sides)
-                        if visibility != 0:
-                            ray_count = rays
-                        split = seen[2] > 0.0 and seen[2] < 1.0 and largest > PARTIAL * threshold
-                    else:
-                        f_ab = centre_ff(t, s, a, b, sides)
-                        f_ba = centre_ff(t, s, b, a, sides)
-                        out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
-                    if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
-                        dec = LINK
-                if split:
-                    if leaf_a or (not leaf_b and need_b >= need_a):
-                        dec = SPLIT_B
-                        r = children(t, b)
-                        count = r[1] - r[0]
-                    else:
-                        dec = SPLIT_A
-                        r = children(t, a)
-                        count = r[1] - r[0]
-    decision[i] = dec
-    out_count[i] = count
-    link_count[i] = int(dec == LINK)
-    values[i] = out
-    visible_out[i] = wp.vec2(seen[0], seen[1])
-    traced[i] = ray_count
+    our threads, so no shared counter). Each thread takes ``grain`` consecutive candidates of the
+    ``size`` queued."""
+    first = (wp.tid() + offset) * grain
+    for i in range(first, wp.min(first + grain, size)):
+        a = qa[i]
+        b = qb[i]
+        dec = DROP
+        count = int(0)
+        out = wp.vec4(0.0)
+        seen = wp.vec3(1.0)
+        ray_count = int(0)
+        leaf_a = t.descend[a] < 0
+        leaf_b = t.descend[b] < 0
+        if t.area[a] > 0.0 and t.area[b] > 0.0:
+            if a == b:
+                if not leaf_a:
+                    r = children(t, a)
+                    k = r[1] - r[0]
+                    dec = SPLIT_SELF
+                    count = k * (k + 1) // 2
+            elif leaf_a and leaf_b:
+                ea = t.element[a]
+                eb = t.element[b]
+                f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
+                f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
+                if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
+                    dec = LINK
+                    v = float(1.0)
+                    if visibility != 0 and rays > 0:
+                        v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
+                        ray_count = rays
+                    out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
+                    seen = wp.vec3(v, v, v)
+            else:
+                need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
+                                 t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b], sides)
+                if need[2] > 0.0:
+                    w = float(1.0)
+                    if weighted != 0:
+                        w = wp.max(weight[a], weight[b])
+                    need_a = need[0] * w
+                    need_b = need[1] * w
+                    largest = wp.max(need_a, need_b)
+                    split = largest > threshold
+                    if not split:
+                        if rays > 0:
+                            probe = largest > PARTIAL * threshold
+                            out, seen, ray_count = sampled_transfer(t, s, sm, a, b, rays, visibility, seed,
+                                                                    sides, probe)
+                            split = probe and seen[2] > 0.0 and seen[2] < 1.0
+                        else:
+                            f_ab = centre_ff(t, s, a, b, sides)
+                            f_ba = centre_ff(t, s, b, a, sides)
+                            out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
+                        if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
+                            dec = LINK
+                    if split:
+                        if leaf_a or (not leaf_b and need_b >= need_a):
+                            dec = SPLIT_B
+                            r = children(t, b)
+                            count = r[1] - r[0]
+                        else:
+                            dec = SPLIT_A
+                            r = children(t, a)
+                            count = r[1] - r[0]
+        decision[i] = dec
+        out_count[i] = count
+        link_count[i] = int(dec == LINK)
+        values[i] = out
+        visible_out[i] = wp.vec2(seen[0], seen[1])
+        traced[i] = ray_count
 
 
 @wp.kernel
@@ -704,6 +761,7 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     if weight is None:
         weight = wp.zeros(1, dtype=wp.float32, device=d)
     root = _canonical_root(tree)
+    grain = 1 if dev.is_cuda else GRAIN
     qa = wp.full(1, root, dtype=wp.int32, device=d)
     qb = wp.full(1, root, dtype=wp.int32, device=d)
     parts, total, rounds = [], 0, 0
@@ -715,10 +773,10 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         values = wp.empty(q, dtype=wp.vec4, device=d)
         seen = wp.empty(q, dtype=wp.vec2, device=d)
         rays = wp.empty(q, dtype=wp.int32, device=d)
-        device_mod.launch(_oracle_kernel, q,
-                          [qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted), weight,
-                           int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides), decision,
-                           out_count, link_count, values, seen, rays],
+        device_mod.launch(_oracle_kernel, -(-q // grain),
+                          [grain, q, qa, qb, t, problem.surfels, sm, cone, float(threshold), int(weighted),
+                           weight, int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919,
+                           int(oracle.sides), decision, out_count, link_count, values, seen, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
         with device_mod.section("links.scan", dev):
             if oracle.visibility and oracle.rays > 0:
@@ -748,6 +806,108 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
                 wp.copy(dst, src, dest_offset=start, count=src.size)
             start += part[0].size
     return (*out, rounds)
+
+
+@wp.kernel
+def _count_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
+                  lb: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)):
+    """Run t (links t·run … t·run + run − 1): how many of its directed links each node receives,
+    in row t of counts (int32[runs·m], no other thread writes it)."""
+    t = wp.tid() + offset
+    row = t * m
+    for i in range(t * run, wp.min(t * run + run, pairs)):
+        counts[row + la[i]] += 1
+        counts[row + lb[i]] += 1
+
+
+@wp.kernel
+def _total_kernel(offset: int, runs: int, m: int, counts: wp.array(dtype=wp.int32),
+                  totals: wp.array(dtype=wp.int32)):
+    """Node r: the directed links it receives, over all runs."""
+    r = wp.tid() + offset
+    total = int(0)
+    for t in range(runs):
+        total += counts[t * m + r]
+    totals[r] = total
+
+
+@wp.kernel
+def _cursor_kernel(offset: int, runs: int, m: int, offsets: wp.array(dtype=wp.int32),
+                   counts: wp.array(dtype=wp.int32)):
+    """Node r: where run t's first link to it goes (after those of the runs before), in place of
+    run t's count."""
+    r = wp.tid() + offset
+    at = offsets[r]
+    for t in range(runs):
+        k = counts[t * m + r]
+        counts[t * m + r] = at
+        at += k
+
+
+@wp.kernel
+def _place_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
+                  lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
+                  lvisible: wp.array(dtype=wp.vec2), cursor: wp.array(dtype=wp.int32), out: LinkSet):
+    """Run t's directed links, in order, at their receivers' next places (``cursor``: row t of
+    ``_cursor_kernel``'s places, advanced as they fill): sender, transfer, normaliser, visible."""
+    t = wp.tid() + offset
+    row = t * m
+    for i in range(t * run, wp.min(t * run + run, pairs)):
+        a = la[i]
+        b = lb[i]
+        x = lvalues[i]
+        v = lvisible[i]
+        j = cursor[row + a]
+        cursor[row + a] = j + 1
+        out.sender[j] = b
+        out.transfer[j] = x[0]
+        out.form_factor[j] = x[2]
+        out.visible[j] = wp.uint8(wp.int32(v[0] * 255.0 + 0.5))
+        j = cursor[row + b]
+        cursor[row + b] = j + 1
+        out.sender[j] = a
+        out.transfer[j] = x[1]
+        out.form_factor[j] = x[3]
+        out.visible[j] = wp.uint8(wp.int32(v[1] * 255.0 + 0.5))
+
+
+def _by_receiver(dev, n: int, la: wp.array, lb: wp.array, lvalues: wp.array, lvisible: wp.array) -> LinkSet:
+    """Both directions of the links la–lb (int32[p] node pairs, vec4[p] values, vec2[p] visible
+    fractions; see ``_scatter_kernel``) sorted by receiver into the ``LinkSet`` over n nodes; a
+    receiver's links in the order of the directed links, 2i (receiver la[i]) and 2i + 1 (lb[i]).
+
+    On a GPU a radix sort of the directed links by receiver. On the CPU a stable counting sort,
+    one run of the links per thread: each thread counts its run's links per receiver, the counts
+    give each run's place in every row, and each thread places its run there (measured on a 10 k
+    room: 0.015–0.019 CPU s against 0.042–0.048 for the radix sort, same links)."""
+    d = dev.name
+    pairs = la.size
+    count = 2 * pairs
+    out = LinkSet()
+    out.offsets = wp.zeros(n + 1, dtype=wp.int32, device=d)
+    out.sender = wp.empty(max(count, 1), dtype=wp.int32, device=d)
+    out.transfer = wp.empty(max(count, 1), dtype=wp.float32, device=d)
+    out.form_factor = wp.empty(max(count, 1), dtype=wp.float32, device=d)
+    out.visible = wp.empty(max(count, 1), dtype=wp.uint8, device=d)
+    if dev.is_cuda:
+        keys = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
+        values = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
+        device_mod.launch(_directed_kernel, pairs, [la, lb, keys, values], dev)
+        with device_mod.section("links.sort", dev):
+            wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
+        device_mod.launch(_csr_kernel, count, [count, n, keys, values, la, lb, lvalues, lvisible, out], dev)
+        return out
+    runs = dev.threads
+    run = max(1, -(-pairs // runs))
+    counts = wp.zeros(runs * n, dtype=wp.int32, device=d)  # [run, receiver], then where each run's links go
+    totals = wp.zeros(n + 1, dtype=wp.int32, device=d)
+    device_mod.launch(_count_kernel, runs, [run, pairs, n, la, lb, counts], dev)
+    device_mod.launch(_total_kernel, n, [runs, n, counts, totals], dev)
+    with device_mod.section("links.sort", dev):
+        wp.utils.array_scan(totals, out.offsets, inclusive=False)
+    device_mod.launch(_cursor_kernel, n, [runs, n, out.offsets, counts], dev)
+    device_mod.launch(_place_kernel, runs, [run, pairs, n, la, lb, lvalues, lvisible, counts, out], dev)
+    return out
 
 
 def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
@@ -784,20 +944,7 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
                     f"threshold {oracle.threshold:g}: {2 * pairs} links made at threshold "
                     f"{threshold:g} (coarser, less accurate); raise --link-memory for the finer links")
 
-    n = tree.count
-    count = 2 * pairs
-    keys = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
-    values = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
-    device_mod.launch(_directed_kernel, pairs, [la, lb, keys, values], dev)
-    with device_mod.section("links.sort", dev):
-        wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
-    out = LinkSet()
-    out.offsets = wp.zeros(n + 1, dtype=wp.int32, device=d)
-    out.sender = wp.empty(max(count, 1), dtype=wp.int32, device=d)
-    out.transfer = wp.empty(max(count, 1), dtype=wp.float32, device=d)
-    out.form_factor = wp.empty(max(count, 1), dtype=wp.float32, device=d)
-    out.visible = wp.empty(max(count, 1), dtype=wp.uint8, device=d)
-    device_mod.launch(_csr_kernel, count, [count, n, keys, values, la, lb, lvalues, lvisible, out], dev)
+    out = _by_receiver(dev, tree.count, la, lb, lvalues, lvisible)
     if dev.is_cuda:
         wp.synchronize_device(d)
     return Links(set=out, pairs=pairs, threshold=threshold, rounds=rounds,

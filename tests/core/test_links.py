@@ -181,8 +181,9 @@ def test_a_moved_scene_gets_its_links_made_again():
 
 
 def test_a_profile_times_each_kernel_of_a_link_build_and_nothing_when_off():
-    """Inside ``device.profiling()`` every launch of a link build is counted under its kernel and
-    the scans and the sort under their sections; outside, nothing is collected."""
+    """Inside ``device.profiling()`` every launch of a link build is counted under its kernel (on
+    the CPU the counting sort's too) and the scans and the sort under their sections; outside,
+    nothing is collected."""
     from radiosity_baker.core import device
 
     problem = Problem(box_room(4), CPU)
@@ -192,8 +193,8 @@ def test_a_profile_times_each_kernel_of_a_link_build_and_nothing_when_off():
     rows = table.as_dict()
     assert rows["links._oracle_kernel"]["calls"] == made.rounds
     assert rows["links._scatter_kernel"]["calls"] == made.rounds
-    assert rows["links._csr_kernel"]["threads"] == made.count
-    assert {"links.scan", "links.sort"} <= set(rows)
+    assert rows["links._place_kernel"]["calls"] == 1
+    assert {"links.scan", "links.sort", "links._count_kernel", "links._cursor_kernel"} <= set(rows)
     assert all(r["seconds"] >= 0 and r["cpu_seconds"] >= 0 for r in rows.values())
     links.build(problem, links.Oracle(threshold=0.1))
     assert table.as_dict() == rows
