@@ -140,7 +140,7 @@ class Settings:
                                  "shadows)", "solver", low=1, soft_high=256, flag="--samples")
     light_selection: str = _option("auto", "Light Selection", "how shadow rays are shared among "
                                    "the emitters; auto: exact for up to 16 emitters or while "
-                                   "receivers × emitters stay under 16 million, else the tree", "solver",
+                                   "receivers × emitters stay under 134 million, else the tree", "solver",
                                    choices=LIGHT_SELECTIONS)
     visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair (reference) or "
                                    "link (hierarchical) for the visibility of indirect light; "
