@@ -1,6 +1,7 @@
 """Accuracy and speed of every method against Cycles, in one run (issues #3 and #5).
 
-    .venv/bin/python bench/accuracy.py [--scenes cornell_box lamp_scene flat_furnace emissive_room]
+    .venv/bin/python bench/accuracy.py [--scenes cornell_box lamp_scene flat_furnace emissive_room
+                                                  furnished_room open_scene]
                                        [--methods direct reference bunnell]
                                        [--samples 16 64 256 1024] [--reference-samples 4096]
                                        [--no-ao] [--device auto|cpu|cuda]
@@ -8,7 +9,9 @@
                                         [--light-selections tree exact]]
 
 For each scene — the sample scenes, and built in code (``bench/emissive_scenes.py``) a closed
-flat-shaded emissive furnace and a room lit by a 2 304-triangle emissive sign — two quantities, each against Cycles bakes of the same vertices at each
+flat-shaded emissive furnace and a room lit by a 2 304-triangle emissive sign, and
+(``bench/real_scenes.py``) a furnished room of 8 940 vertices and an open scene lit by the sun —
+two quantities, each against Cycles bakes of the same vertices at each
 sample count and at a high sample count taken as the truth:
 
 - lighting (DIFFUSE, Direct + Indirect, no Color) for each method of ours: relative RMSE, mean
@@ -55,6 +58,9 @@ from test_reference_vs_cycles import receivers  # noqa: E402  (the same receiver
 from test_lightmap_vs_cycles import _next_to_a_jump  # noqa: E402  (the same texels left out)
 sys.path.insert(0, str(ROOT / "bench"))
 import emissive_scenes  # noqa: E402  (scenes built in code: the flat-shaded furnace, the emissive room)
+import real_scenes  # noqa: E402  (scenes built in code: the furnished room, the open scene)
+
+SCENES = {**emissive_scenes.SCENES, **real_scenes.SCENES}  # the scenes built in code, by name
 
 
 # What each quantity is baked as in Cycles, how errors are summarised, and which summary entry the
@@ -135,10 +141,9 @@ def direct_runs(light_samples, selections, device) -> dict:
 
 
 def _open(scene_name):
-    """Open a sample scene (``sample_blends``) or build one in code (``emissive_scenes.SCENES``);
-    the scene."""
-    if scene_name in emissive_scenes.SCENES:
-        emissive_scenes.SCENES[scene_name]()
+    """Open a sample scene (``sample_blends``) or build one in code (``SCENES``); the scene."""
+    if scene_name in SCENES:
+        SCENES[scene_name]()
     else:
         bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_blends" / f"{scene_name}.blend"))
     return bpy.context.scene
@@ -146,7 +151,7 @@ def _open(scene_name):
 
 def run_scene(scene_name, methods, samples, reference_samples, device, with_ao, passes="all",
               light_samples=(64,), selections=("auto",)):
-    """One sample scene (``sample_blends``) or scene built in code (``emissive_scenes.SCENES``);
+    """One sample scene (``sample_blends``) or scene built in code (``SCENES``);
     ``passes`` direct compares direct light alone (``direct_runs``, no AO)."""
     scene = _open(scene_name)
     names = receivers(scene)
@@ -303,7 +308,7 @@ def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes,
     method = dict(method or {})
     scene = _open(scene_name)
     # the sample scenes: every mesh but the Cornell light; scenes built in code: their reflectors
-    names = (receivers(scene) if scene_name in emissive_scenes.SCENES
+    names = (receivers(scene) if scene_name in SCENES
              else sorted(o.name for o in scene.objects if o.type == "MESH" and o.name != "Light"))
     out = {"objects": names, "method": method.get("method", Settings().method), "settings": method,
            "passes": list(PASSES[passes]),
@@ -475,7 +480,7 @@ def main(argv=None) -> int:
     parser.add_argument("--lightmap", action="store_true",
                         help="compare lightmaps with Cycles' image bake instead")
     parser.add_argument("--lightmap-scene", default="cornell_box",
-                        help="a sample scene or one built in code (emissive_room, flat_furnace)")
+                        help=f"a sample scene or one built in code ({', '.join(SCENES)})")
     parser.add_argument("--truth-size", type=int, default=256, help="page with a high-sample Cycles truth")
     parser.add_argument("--pair-sizes", type=int, nargs="*", default=[1024],
                         help="pages whose Cycles noise is measured from pairs of bakes")
