@@ -16,7 +16,9 @@ materials are matte Principled BSDFs (Specular IOR Level 0, Roughness 1).
 """
 from __future__ import annotations
 
+import importlib.util
 import math
+from pathlib import Path
 
 import bpy
 import numpy as np
@@ -24,17 +26,12 @@ import numpy as np
 from emissive_scenes import _box, _empty, _material, make_samples
 from rooms import FURNITURE, ROOM
 
-
-def _lamp(name, kind, location, rotation=(0.0, 0.0, 0.0), **fields):
-    """A lamp object of ``kind`` with Light data ``fields``, linked to the scene."""
-    data = bpy.data.lights.new(name, kind)
-    for key, value in fields.items():
-        setattr(data, key, value)
-    lamp = bpy.data.objects.new(name, data)
-    lamp.location = location
-    lamp.rotation_euler = rotation
-    bpy.context.scene.collection.objects.link(lamp)
-    return lamp
+# sample_blends/make_level.py (a script, not a package): its lamp builder
+_spec = importlib.util.spec_from_file_location(
+    "make_level", Path(__file__).resolve().parents[1] / "sample_blends" / "make_level.py")
+make_level = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(make_level)
+_lamp = make_level._lamp
 
 
 def _capsule(radius, height, segments):
