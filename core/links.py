@@ -857,18 +857,20 @@ def _place_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=
         b = lb[i]
         x = lvalues[i]
         v = lvisible[i]
-        j = cursor[row + a]
-        cursor[row + a] = j + 1
-        out.sender[j] = b
-        out.transfer[j] = x[0]
-        out.form_factor[j] = x[2]
-        out.visible[j] = wp.uint8(wp.int32(v[0] * 255.0 + 0.5))
-        j = cursor[row + b]
-        cursor[row + b] = j + 1
-        out.sender[j] = a
-        out.transfer[j] = x[1]
-        out.form_factor[j] = x[3]
-        out.visible[j] = wp.uint8(wp.int32(v[1] * 255.0 + 0.5))
+        _place(out, cursor, row + a, b, x[0], x[2], v[0])
+        _place(out, cursor, row + b, a, x[1], x[3], v[1])
+
+
+@wp.func
+def _place(out: LinkSet, cursor: wp.array(dtype=wp.int32), slot: int, sender: int, transfer: float,
+           form_factor: float, visible: float):
+    """One directed link at its receiver's next place (``cursor[slot]``, then advanced)."""
+    j = cursor[slot]
+    cursor[slot] = j + 1
+    out.sender[j] = sender
+    out.transfer[j] = transfer
+    out.form_factor[j] = form_factor
+    out.visible[j] = wp.uint8(wp.int32(visible * 255.0 + 0.5))
 
 
 def _by_receiver(dev, n: int, la: wp.array, lb: wp.array, lvalues: wp.array, lvisible: wp.array) -> LinkSet:
