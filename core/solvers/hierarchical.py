@@ -32,11 +32,13 @@ import warp as wp
 
 from .. import device as device_mod
 from .. import links as links_mod
+from .. import nearfield
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet, Sampling, leaf_point, sample_leaf, sided_ff
+from ..nearfield import Detail, sent_at
 from ..rays import lift, visible
 from ..rootpath import WHOLE, path_link_begin, path_link_next, path_top, path_up
-from ..surfels import Surfels, fan_sample, point_ff
+from ..surfels import Surfels, fan_point, point_ff
 from .base import Solution, exitance, iterate, reconstruct_with_detail
 
 
@@ -75,6 +77,13 @@ def first_radiance(problem) -> np.ndarray:
 def links_of(problem):
     """The problem's links for this solver (built once, cached)."""
     return problem.links(oracle(problem.settings), lambda: first_radiance(problem))
+
+
+def detail_of(problem, links) -> Detail:
+    """The near senders' detail over ``links`` (``nearfield.build``, once per build of them)."""
+    if "near detail" not in links.derived:
+        links.derived["near detail"] = problem.stages.run("near field", nearfield.build, problem, links)
+    return links.derived["near detail"]
 
 
 @wp.kernel
@@ -132,16 +141,18 @@ def _above_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.a
 
 
 @wp.func
-def path_gather(t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.array(dtype=wp.vec3),
+def path_gather(t: Nodes, s: Surfels, ls: LinkSet, nf: Detail, radiance: wp.array(dtype=wp.vec3),
                 above: wp.array(dtype=wp.vec3), limit: float, k: int, p: wp.vec3, n: wp.vec3):
     """(lighting, links evaluated) that leaf k's root path brings to point p (unit normal n): the
     links of nodes with at most ``limit`` leaves each at p (``transfer_at``, leaf k's own as they
-    are), those of larger nodes as they bring it to the highest such node (``above``)."""
+    are; near senders' light as p sees it, ``nearfield.sent_at``), those of larger nodes as they
+    bring it to the highest such node (``above``)."""
     acc = wp.vec3(0.0)
     count = int(0)
     walk = path_link_begin(t, ls, k, limit)
     while walk.node >= 0:
-        acc += radiance[ls.sender[walk.link]] * transfer_at(t, s, ls, walk.link, p, n, int(walk.node != k), 1)
+        acc += sent_at(nf, t, s, radiance, ls.sender[walk.link], p, n) * transfer_at(
+            t, s, ls, walk.link, p, n, int(walk.node != k), 1)
         count += 1
         walk = path_link_next(t, ls, walk)
     acc += above[path_top(t, k, limit)]  # 0 at the root
@@ -149,13 +160,13 @@ def path_gather(t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.array(dtype=wp.v
 
 
 @wp.kernel
-def _leaf_gather_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.array(dtype=wp.vec3),
-                        above: wp.array(dtype=wp.vec3), limit: float, out: wp.array(dtype=wp.vec3),
-                        evaluations: wp.array(dtype=wp.int32)):
+def _leaf_gather_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, nf: Detail,
+                        radiance: wp.array(dtype=wp.vec3), above: wp.array(dtype=wp.vec3), limit: float,
+                        out: wp.array(dtype=wp.vec3), evaluations: wp.array(dtype=wp.int32)):
     """Leaf k's element: ``path_gather`` at its own point and normal."""
     k = wp.tid() + offset
     e = t.element[k]
-    light, count = path_gather(t, s, ls, radiance, above, limit, k, s.pos[e], s.nrm[e])
+    light, count = path_gather(t, s, ls, nf, radiance, above, limit, k, s.pos[e], s.nrm[e])
     out[e] = light
     evaluations[k] = count
 
@@ -186,7 +197,7 @@ class Iteration:
         (``_leaf_gather_kernel``); returns the link evaluations made."""
         p = self.problem
         exitance(p, direct, indirect, self.exitance)
-        return _leaf_gather(p, self.links, self.exitance, self.radiance, out)
+        return _leaf_gather(p, self.links, detail_of(p, self.links), self.exitance, self.radiance, out)
 
 
 def _above(problem, links, radiance: wp.array) -> wp.array:
@@ -198,15 +209,16 @@ def _above(problem, links, radiance: wp.array) -> wp.array:
     return above
 
 
-def _leaf_gather(problem, links, exitance: wp.array, radiance: wp.array, out: wp.array) -> int:
+def _leaf_gather(problem, links, detail: Detail, exitance: wp.array, radiance: wp.array, out: wp.array) -> int:
     """out (vec3[n]) ← the leaf gather of ``exitance`` (vec3[n], ρ ⊙ lighting per element) over
-    ``links``, ``radiance`` (vec3[m]) the node means it fills; returns the link evaluations."""
+    ``links`` with the near senders' ``detail``, ``radiance`` (vec3[m]) the node means it fills;
+    returns the link evaluations."""
     tree, dev = problem.tree, problem.device
     n = problem.elements.count
     node_means(tree, exitance, radiance)
     evaluations = wp.empty(n, dtype=wp.int32, device=dev.name)
     device_mod.launch(_leaf_gather_kernel, n,
-                      [tree.nodes, problem.surfels, links.set, radiance, _above(problem, links, radiance),
+                      [tree.nodes, problem.surfels, links.set, detail, radiance, _above(problem, links, radiance),
                        float(LEAF_LIMIT), out, evaluations], dev)
     return int(evaluations.numpy().astype(np.int64).sum())
 
@@ -214,10 +226,11 @@ def _leaf_gather(problem, links, exitance: wp.array, radiance: wp.array, out: wp
 def leaf_gather(problem, links, exitance: np.ndarray) -> np.ndarray:
     """float32[n,3]: the lighting (irradiance/π) each element receives over ``links`` from the
     elements' ``exitance`` (float32[n,3], the radiance ρ ⊙ lighting leaving their fronts), each
-    link evaluated at the receiving element (what the solver's last step does)."""
+    link evaluated at the receiving element (what the solver's last step does, without the near
+    senders' detail of the direct light: ``exitance`` is any)."""
     d = problem.device.name
     out = wp.empty(problem.elements.count, dtype=wp.vec3, device=d)
-    _leaf_gather(problem, links, wp.array(np.ascontiguousarray(exitance, np.float32), dtype=wp.vec3, device=d),
+    _leaf_gather(problem, links, nearfield.empty(problem.elements.count, d), wp.array(np.ascontiguousarray(exitance, np.float32), dtype=wp.vec3, device=d),
                  wp.empty(problem.tree.count, dtype=wp.vec3, device=d), out)
     return out.numpy()
 
@@ -252,7 +265,7 @@ def on_path(t: Nodes, leaf: int, x: int) -> int:
 def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=wp.vec3),
                          rsize: wp.array(dtype=wp.float32), corners: wp.array2d(dtype=wp.int32),
                          weights: wp.array2d(dtype=wp.float32), leaf_of: wp.array(dtype=wp.int32), t: Nodes,
-                         s: Surfels, ls: LinkSet, sm: Sampling, radiance: wp.array(dtype=wp.vec3),
+                         s: Surfels, ls: LinkSet, nf: Detail, sm: Sampling, radiance: wp.array(dtype=wp.vec3),
                          above: wp.array(dtype=wp.vec3), limit: float, rays: int, seed: int,
                          out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int32)):
     """Receiver i (a texel): for each element it is reconstructed from (weights), what the links of
@@ -290,7 +303,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                 break
             for j in range(ls.offsets[x], ls.offsets[x + 1]):
                 b = ls.sender[j]
-                glow = radiance[b]
+                glow = sent_at(nf, t, s, radiance, b, p, n)
                 if glow[0] + glow[1] + glow[2] <= 0.0:
                     continue
                 f = float(0.0)
@@ -304,7 +317,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                         h = float(0.0)
                         for r in range(rays):
                             e = t.element[sample_leaf(t, sm, b, (float(r) + wp.randf(state)) / float(rays))]
-                            q = fan_sample(s, e, wp.randf(state), wp.randf(state), wp.randf(state))
+                            q = fan_point(s, e, wp.randf(state), wp.randf(state), wp.randf(state))
                             h += visible(s.mesh, origin, lift(q, s.nrm[e], wp.sqrt(s.area[e])))
                         f *= h / float(rays) * 255.0 / float(seen)  # the texel's visible fraction for the link's
                         count += rays
@@ -337,7 +350,8 @@ def texel_gather(problem, links, lighting: np.ndarray, receivers, progress=None)
         [arr(receivers.points.astype(np.float32), wp.vec3), arr(receivers.normals.astype(np.float32), wp.vec3),
          arr(receivers.sizes.astype(np.float32), wp.float32), arr(receivers.elements.astype(np.int32), wp.int32),
          arr(receivers.weights.astype(np.float32), wp.float32), arr(leaf_of, wp.int32), tree.nodes,
-         problem.surfels, links.set, sm, radiance, _above(problem, links, radiance), float(LEAF_LIMIT),
+         problem.surfels, links.set, detail_of(problem, links), sm, radiance, _above(problem, links, radiance),
+         float(LEAF_LIMIT),
          int(settings.visibility_rays), int(settings.seed) + 104729, out, traced],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)
     return out.numpy(), int(traced.numpy().sum(dtype=np.int64))
