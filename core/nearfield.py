@@ -9,7 +9,7 @@ the capsule's lowest 5 cm, which no finer link or extra ray moved).
 
 So the triangles of every leaf that sends to a receiver within √FAR of its sizes get direct light
 traced at fixed points (PER_TRIANGLE each, an R2 set of barycentric coordinates; ``core.direct``,
-the light samples shared among the points), kept where it varies over them and their corners.
+the light samples shared among the points) where its corners' direct light differs.
 A leaf seen from p within √FAR sizes then sends ρ ⊙ (D̃ + I), D̃ its triangles' direct light
 averaged with the point-to-point kernel cos θ cos θ' / r² from p (a corner's own value where
 none was kept; ``sent_at``), in full within NEAR sizes and blended out by FAR. Indirect light
@@ -39,20 +39,22 @@ PER_TRIANGLE = 32
 # triangles below NEAR × its area, as its element average beyond FAR × its area (blended between).
 NEAR = 4.0
 FAR = 16.0
-# A triangle keeps its points' direct light when it varies over them and its corners by more than
-# this fraction of the brightest direct lighting of any element (elsewhere its corners' own values
-# stand).
+# A triangle of a near sender gets points traced when its corners' direct lighting differs by more
+# than this fraction of the brightest direct lighting of any element (elsewhere its corners' own
+# values stand).
 VARIES = 0.01
 PI = math.pi
 
 
 @wp.struct
 class Detail:
-    """direct: vec3[n] each element's direct lighting (irradiance/π); bary: vec3[PER_TRIANGLE] the
-    points' barycentric coordinates; row: int32[T] each triangle's row of ``light``, −1 where its
-    elements' own direct light stands; light: vec3[R, PER_TRIANGLE] direct lighting at its points."""
+    """direct: vec3[n] each element's direct lighting (irradiance/π); detailed: int32[n] 1 where
+    a triangle of the element has points traced; bary: vec3[PER_TRIANGLE] the points' barycentric
+    coordinates; row: int32[T] each triangle's row of ``light``, −1 where its elements' own direct
+    light stands; light: vec3[R, PER_TRIANGLE] direct lighting at its points."""
 
     direct: wp.array(dtype=wp.vec3)
+    detailed: wp.array(dtype=wp.int32)
     bary: wp.array(dtype=wp.vec3)
     row: wp.array(dtype=wp.int32)
     light: wp.array2d(dtype=wp.vec3)
@@ -68,6 +70,8 @@ def sent_at(nf: Detail, t: Nodes, s: Surfels, radiance: wp.array(dtype=wp.vec3),
     if t.descend[b] >= 0 or nf.direct.shape[0] == 0:
         return glow
     e = t.element[b]
+    if nf.detailed[e] == 0:  # its own direct light over all of its triangles
+        return glow
     a = s.area[e]
     d = s.centre[e] - p
     blend = wp.clamp((FAR - wp.dot(d, d) / a) / (FAR - NEAR), 0.0, 1.0)
@@ -129,6 +133,7 @@ def empty(n: int, device: str) -> Detail:
     """A ``Detail`` that leaves every sender as its element average."""
     nf = Detail()
     nf.direct = wp.zeros(0, dtype=wp.vec3, device=device)
+    nf.detailed = wp.zeros(0, dtype=wp.int32, device=device)
     nf.bary = wp.zeros(PER_TRIANGLE, dtype=wp.vec3, device=device)
     nf.row = wp.zeros(0, dtype=wp.int32, device=device)
     nf.light = wp.zeros((1, PER_TRIANGLE), dtype=wp.vec3, device=device)
@@ -150,31 +155,32 @@ def build(problem, links) -> Detail:
     # the chosen elements' triangles: each fan's range of fan_triangles, one after another
     tris = np.unique(els.fan_triangles[np.arange(lengths.sum()) + np.repeat(starts - (np.cumsum(lengths) - lengths),
                                                                             lengths)])
+    # only where its corners' direct light differs can a triangle's vary much (a shadow that
+    # crosses a triangle without touching a corner is missed)
+    spread = np.ptp(problem.direct[els.corner[tris]], axis=1).max(axis=1)
+    tris = tris[spread > VARIES * max(float(problem.direct.max(initial=0.0)), 1e-30)]
     bary = barycentric(PER_TRIANGLE)
-    corners = scene.positions[scene.triangles[tris]]  # [M,3,3]
-    points = np.einsum("pk,mkc->mpc", bary, corners).reshape(-1, 3)
-    normals = np.einsum("pk,mkc->mpc", bary, np.asarray(scene.corner_normals, np.float32)[tris]).reshape(-1, 3)
-    sizes = np.repeat(np.sqrt(scene.triangle_areas()[tris] / PER_TRIANGLE), PER_TRIANGLE).astype(np.float32)
-    settings = problem.settings
     row = np.full(scene.num_triangles, -1, np.int32)
-    light = np.zeros((1, PER_TRIANGLE, 3), np.float32)
-    if len(points):
+    row[tris] = np.arange(len(tris), dtype=np.int32)
+    detailed = np.zeros(n, np.int32)
+    detailed[els.corner[tris].ravel()] = 1
+    light = np.zeros((max(len(tris), 1), PER_TRIANGLE, 3), np.float32)
+    if len(tris):
+        corners = scene.positions[scene.triangles[tris]]  # [M,3,3]
+        points = np.einsum("pk,mkc->mpc", bary, corners).reshape(-1, 3)
+        normals = np.einsum("pk,mkc->mpc", bary, np.asarray(scene.corner_normals, np.float32)[tris]).reshape(-1, 3)
+        sizes = np.repeat(np.sqrt(scene.triangle_areas()[tris] / PER_TRIANGLE), PER_TRIANGLE).astype(np.float32)
+        settings = problem.settings
         traced, rays, _, _ = direct_mod.estimate(
             problem, points, normals, sizes, np.full(len(points), direct_mod.MODE_FULL, np.int32),
             max(1, math.ceil(settings.light_samples / PER_TRIANGLE)), settings.seed + 7919)
         problem.counts["rays"] += int(rays.sum())
-        traced = traced.reshape(-1, PER_TRIANGLE, 3)
-        # over the points and the corners' elements, whose own values stand in where it does not
-        values = np.concatenate([traced, problem.direct[els.corner[tris]]], axis=1)
-        spread = (values.max(axis=1) - values.min(axis=1)).max(axis=1)
-        varies = spread > VARIES * max(float(problem.direct.max(initial=0.0)), 1e-30)
-        row[tris[varies]] = np.arange(int(varies.sum()), dtype=np.int32)
-        if varies.any():
-            light = traced[varies]
+        light = traced.reshape(-1, PER_TRIANGLE, 3)
     problem.counts["near_senders"] = int(len(chosen))
     problem.counts["near_triangles_traced"] = int(len(tris))
     nf = Detail()
     nf.direct = wp.array(problem.direct, dtype=wp.vec3, device=d)
+    nf.detailed = wp.array(detailed, dtype=wp.int32, device=d)
     nf.bary = wp.array(bary, dtype=wp.vec3, device=d)
     nf.row = wp.array(row, dtype=wp.int32, device=d)
     nf.light = wp.array(np.ascontiguousarray(light), dtype=wp.vec3, device=d)
