@@ -29,7 +29,7 @@ leaves (``element_ray``; with visibility). Given a radiance estimate, leaves are
 sampling density (self-normalised), so what a link carries is Σ A·B·F·V over the sender — a hot
 spot hidden in a cluster (the ceiling 1 mm above the Cornell light) does not leak through the
 cluster's visible parts. Two leaves get the element form factors of ``core.surfels`` and
-``pair_visibility``: with leaves only, links are the reference's transport. Solvers without explicit
+``pair_hits``: with leaves only, links are the reference's transport. Solvers without explicit
 visibility (antiradiance, implicit visibility) ask for ``visibility=False``; antiradiance, whose
 antiradiance crosses surfaces, also for ``sides=2``: pairs whose faces see each other either way
 link (even with no transfer to either front: what arrives at a back goes on through), and
@@ -60,7 +60,7 @@ from .errors import BakeError
 from .formfactor import cluster_ff, disk_ff
 from .hierarchy import Nodes
 from .rays import lift, visible
-from .surfels import Surfels, face_ff, fan_point, pair_visibility
+from .surfels import Surfels, face_ff, fan_sample, pair_hits
 
 DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
 # Peak bytes per link (both directions): the pair and its five values while it is made, then two
@@ -329,14 +329,14 @@ def leaf_point(t: Nodes, s: Surfels, leaf: int) -> wp.vec3:
 
 
 @wp.func
-def element_ray(s: Surfels, i: int, j: int, u: wp.vec3, v: wp.vec3) -> float:
-    """1 if a ray between a point of element i's triangles and one of element j's is free, else 0
-    (``fan_point`` at u and v ∈ [0, 1)³, from the lower-numbered element, both lifted off their
-    surfaces: the region ``pair_visibility`` samples)."""
+def element_ray(s: Surfels, i: int, j: int, u0: float, u1: float, u2: float) -> float:
+    """1 if one of the reference's visibility rays between elements i and j is free (``pair_hits``:
+    from the lower-numbered one's point to a point of the other's own surface, both lifted off
+    their surfaces), else 0."""
     lo = wp.min(i, j)
     hi = wp.max(i, j)
-    a = lift(fan_point(s, lo, u[0], u[1], u[2]), s.nrm[lo], wp.sqrt(s.area[lo]))
-    return visible(s.mesh, a, lift(fan_point(s, hi, v[0], v[1], v[2]), s.nrm[hi], wp.sqrt(s.area[hi])))
+    origin = lift(s.pos[lo], s.nrm[lo], wp.sqrt(s.area[lo]))
+    return visible(s.mesh, origin, lift(fan_sample(s, hi, u0, u1, u2), s.nrm[hi], wp.sqrt(s.area[hi])))
 
 
 @wp.func
@@ -402,10 +402,11 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
         f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
         hit = float(1.0)
         if visibility != 0:
-            u = wp.vec3(wp.randf(state), wp.randf(state), wp.randf(state))
-            v = wp.vec3(wp.randf(state), wp.randf(state), wp.randf(state))
+            u0 = wp.randf(state)
+            u1 = wp.randf(state)
+            u2 = wp.randf(state)
             if probe or f_ab > 0.0 or f_ba > 0.0:
-                hit = element_ray(s, ea, eb, u, v)
+                hit = element_ray(s, ea, eb, u0, u1, u2)
                 traced += 1
             else:
                 skipped += 1
@@ -443,13 +444,14 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
             ua = wp.randf(state)
             ub = wp.randf(state)
             pair = _sample_pair(t, sm, a, b, k, rays, shift, ua, ub)
-            u = wp.vec3(wp.randf(state), wp.randf(state), wp.randf(state))
-            v = wp.vec3(wp.randf(state), wp.randf(state), wp.randf(state))
+            u0 = wp.randf(state)
+            u1 = wp.randf(state)
+            u2 = wp.randf(state)
             ea = t.element[pair[0]]
             eb = t.element[pair[1]]
             if not (sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides) > 0.0
                     or sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides) > 0.0):
-                seen += element_ray(s, ea, eb, u, v) - 1.0
+                seen += element_ray(s, ea, eb, u0, u1, u2) - 1.0
                 traced += 1
     plain = seen / float(rays)
     return out, wp.vec3(_fraction(t_ab, u_ab, plain), _fraction(t_ba, u_ba, plain), plain), traced
@@ -552,7 +554,7 @@ def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int
                     dec = LINK
                     v = float(1.0)
                     if visibility != 0 and rays > 0:
-                        v = pair_visibility(s, ea, eb, rays, seed)
+                        v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
                         ray_count = rays
                     out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
                     seen = wp.vec3(v, v, v)

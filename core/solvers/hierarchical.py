@@ -38,7 +38,7 @@ from ..links import LinkSet, Sampling, leaf_point, sample_leaf, sided_ff
 from ..nearfield import Detail, sent_at
 from ..rays import lift, visible
 from ..rootpath import WHOLE, path_link_begin, path_link_next, path_top, path_up
-from ..surfels import Surfels, fan_point, point_ff
+from ..surfels import Surfels, fan_sample, point_ff
 from .base import Solution, exitance, iterate, reconstruct_with_detail
 
 
@@ -317,7 +317,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                         h = float(0.0)
                         for r in range(rays):
                             e = t.element[sample_leaf(t, sm, b, (float(r) + wp.randf(state)) / float(rays))]
-                            q = fan_point(s, e, wp.randf(state), wp.randf(state), wp.randf(state))
+                            q = fan_sample(s, e, wp.randf(state), wp.randf(state), wp.randf(state))
                             h += visible(s.mesh, origin, lift(q, s.nrm[e], wp.sqrt(s.area[e])))
                         f *= h / float(rays) * 255.0 / float(seen)  # the texel's visible fraction for the link's
                         count += rays

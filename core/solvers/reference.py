@@ -3,15 +3,14 @@ ray-cast visibility (O(n²) pairs; the ground truth for small scenes).
 
 Transport ``M[i, j] = F_ij · V_ij``: F_ij the form factor from element i's point to the front face
 of element j (disk approximation far away, exact triangle form factors of j's fan, a third each,
-when d² < NEAR·A_j, ``core.surfels``), V_ij the visible fraction of rays from i to jittered
-points of j's own triangles, weighted by the point-to-point kernel (``surfels.pair_visibility``;
-the same for i→j and j→i, traced once). Then Jacobi sweeps
+when d² < NEAR·A_j, ``core.surfels``), V_ij the unblocked fraction of rays from i to jittered
+points of j's own triangles (the same for i→j and j→i, traced once). Then Jacobi sweeps
 ``I ← M (ρ ⊙ (D + I))`` on the device in lighting units (irradiance/π), D the direct lighting,
 until the largest change is below the tolerance.
 
 What is kept between sweeps depends on the memory budget (``max_pairs`` × 4 bytes): the whole
 float32 matrix when it fits (``matrix``), else the visibility of every pair as one byte
-(``visibility``, × 255; form factors, which cost no rays, are recomputed each sweep), else nothing
+(``visibility``; form factors, which cost no rays, are recomputed each sweep), else nothing
 (``traced``: visibility is traced again each sweep — slow, the bake says so).
 """
 from __future__ import annotations
@@ -21,7 +20,7 @@ import warp as wp
 
 from .. import device as device_mod
 from ..errors import BakeError
-from ..surfels import Surfels, element_ff, pair_visibility
+from ..surfels import Surfels, element_ff, pair_hits
 from .base import Solution, exitance, iterate, reconstruct_with_detail
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
@@ -57,15 +56,15 @@ def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
                 f_ji = element_ff(s, j, i)
                 if f_ij <= 0.0 and f_ji <= 0.0:
                     continue
-                v = pair_visibility(s, i, j, rays, seed)
+                hits = pair_hits(s, i, j, rays, seed)
                 count += rays
                 if mode == MATRIX:
+                    v = float(hits) / float(rays)
                     matrix[i, j] = f_ij * v
                     matrix[j, i] = f_ji * v
                 else:
-                    seen = wp.uint8(int(v * 255.0 + 0.5))
-                    visibility[i, j] = seen
-                    visibility[j, i] = seen
+                    visibility[i, j] = wp.uint8(hits)
+                    visibility[j, i] = wp.uint8(hits)
     traced[t] = count
 
 
@@ -89,9 +88,9 @@ def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
                 f = element_ff(s, i, j)
                 if f > 0.0:
                     if mode == VISIBILITY:
-                        m = f * float(visibility[i, j]) / 255.0
+                        m = f * float(visibility[i, j]) / float(rays)
                     else:
-                        m = f * pair_visibility(s, i, j, rays, seed)
+                        m = f * float(pair_hits(s, i, j, rays, seed)) / float(rays)
                         count += rays
             if m > 0.0:
                 acc += m * wp.cw_mul(s.albedo[j], direct[j] + indirect[j])

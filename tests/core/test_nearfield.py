@@ -1,14 +1,12 @@
 """The near field of the hierarchical solver (issue 21): a receiver close to a sender sees the
-sender's light where it looks, and sees all of a surface it almost touches."""
+sender's direct light where it looks, not the sender element's average."""
 import numpy as np
-import warp as wp
 
 import shapes
 from radiosity_baker.core import Settings
 from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.scene import LAMP_SUN
 from radiosity_baker.core.solvers import hierarchical
-from radiosity_baker.core.surfels import Surfels, pair_visibility, point_ff
 
 FLOOR_ALBEDO = 0.8
 EDGE = 0.1  # the shadow's edge on the floor, x = EDGE: inside the floor elements of x = 0 and 0.2
@@ -52,46 +50,3 @@ def test_receiver_over_a_shadow_edge_sees_the_shadowed_part_of_the_floor_element
     exitance = (els.albedo * problem.direct).astype(np.float32)
     averaged = hierarchical.leaf_gather(problem, hierarchical.links_of(problem), exitance)[on, 0]
     assert averaged.mean() > 2.0 * expected.mean()
-
-
-@wp.kernel
-def _floor_seen(s: Surfels, floor: wp.array(dtype=wp.int32), rays: int, out: wp.array(dtype=wp.vec2)):
-    """Element i: (Σ form factor, Σ form factor × visibility) over the floor's elements."""
-    i = wp.tid()
-    plain = float(0.0)
-    seen = float(0.0)
-    for k in range(floor.shape[0]):
-        f = point_ff(s, s.pos[i], s.nrm[i], floor[k])
-        if f > 0.0:
-            plain += f
-            seen += f * pair_visibility(s, i, floor[k], rays, 1)
-    out[i] = wp.vec2(plain, seen)
-
-
-def test_sphere_resting_on_a_floor_sees_all_of_the_floor_below_its_horizon():
-    """Nothing hides the floor from a sphere's underside, but the floor's vertices under the
-    sphere are hidden from it while their triangles reach out into view. Visibility traced from
-    one element's point counted those floor elements hidden: on the sphere's vertices 1–5 cm up,
-    it found 0.88 of the unoccluded form factor on average and 0.59 at worst. Between points of
-    both elements' triangles, weighted by the kernel: measured 0.975 and 0.75 (bounds 0.94, 0.7).
-    Below 1 cm the facets of a smooth-shaded mesh hide part of what its shading normal's
-    hemisphere holds (0.59 at worst there)."""
-    floor = shapes.grid(6.0, 63)
-    ball_p, ball_n, ball_t = shapes.icosphere(0.25, 3, inward=False)
-    ball_p = ball_p + np.array([0.0, 0.0, 0.25], np.float32)
-    scene = shapes.scene([(*floor, (0.5,) * 3, (0,) * 3), (ball_p, ball_n, ball_t, (0.5,) * 3, (0,) * 3)])
-    problem = Problem(scene, Settings(method="hierarchical", device="cpu"))
-    els = problem.elements
-    pos = els.position + problem.scene.origin
-    on_floor = np.abs(pos[:, 2]) < 1e-6
-    out = wp.zeros(els.count, dtype=wp.vec2, device="cpu")
-    wp.launch(_floor_seen, dim=els.count, device="cpu",
-              inputs=[problem.surfels, wp.array(np.flatnonzero(on_floor).astype(np.int32), dtype=wp.int32, device="cpu"),
-                      problem.settings.visibility_rays, out])
-    plain, seen = out.numpy().T
-    low = ~on_floor & (pos[:, 2] >= 0.01) & (pos[:, 2] < 0.05)
-    assert low.sum() >= 10
-    np.testing.assert_allclose(plain[low], (1.0 - els.normal[low, 2]) / 2.0, rtol=0.05)  # the floor is large
-    ratio = seen[low] / plain[low]
-    assert ratio.mean() > 0.94
-    assert ratio.min() > 0.7
