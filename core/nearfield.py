@@ -28,7 +28,8 @@ from . import device as device_mod
 from . import direct as direct_mod
 from .hierarchy import Nodes
 from .links import LinkSet
-from .surfels import Surfels
+from .rays import lift, visible
+from .surfels import Surfels, point_ff
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -43,6 +44,8 @@ FAR = 16.0
 # than this fraction of the brightest direct lighting of any element (elsewhere its corners' own
 # values stand).
 VARIES = 0.01
+# Points of a near sender that weigh more than this fraction of the whole get their own ray.
+SEEN = 0.01
 PI = math.pi
 
 
@@ -61,47 +64,91 @@ class Detail:
 
 
 @wp.func
-def sent_at(nf: Detail, t: Nodes, s: Surfels, radiance: wp.array(dtype=wp.vec3), b: int, p: wp.vec3,
-            n: wp.vec3) -> wp.vec3:
-    """The radiance node b sends towards point p (unit normal n): ``radiance`` far away or for a
-    cluster; for a leaf near p, with the direct light of its triangles' points weighted as p
-    sees them (see the module docstring)."""
-    glow = radiance[b]
+def _point(nf: Detail, c0: wp.vec3, c1: wp.vec3, c2: wp.vec3, i: int) -> wp.vec3:
+    """Point i of the triangle with corners c0, c1, c2."""
+    u = nf.bary[i]
+    return c0 * u[0] + c1 * u[1] + c2 * u[2]
+
+
+@wp.func
+def _weight(q: wp.vec3, p: wp.vec3, n: wp.vec3, ne: wp.vec3, area2: float) -> float:
+    """The kernel cos θ cos θ' / r² of a point q (a 1/PER_TRIANGLE share of a triangle of twice
+    the area ``area2``, front ne) seen from p (normal n), softened by the point's own patch."""
+    v = q - p
+    r2 = wp.dot(v, v) + area2 / (2.0 * PI * float(PER_TRIANGLE))
+    return area2 * wp.max(wp.dot(n, v), 0.0) * wp.max(-wp.dot(ne, v), 0.0) / (r2 * r2)
+
+
+@wp.func
+def varies(nf: Detail, t: Nodes, b: int) -> bool:
+    """Whether node b is a leaf whose triangles' direct light was traced (it may send light where
+    its own vertex has none)."""
     if t.descend[b] >= 0 or nf.direct.shape[0] == 0:
-        return glow
+        return False
+    return nf.detailed[t.element[b]] != 0
+
+
+@wp.func
+def near_light(nf: Detail, t: Nodes, s: Surfels, b: int, glow: wp.vec3, f: float, p: wp.vec3, n: wp.vec3,
+               origin: wp.vec3) -> wp.vec3:
+    """The light node b sends to point p (unit normal n; rays leave from ``origin``, p lifted)
+    over a link whose transfer at p is f: glow × f far away, for a cluster or for a leaf whose
+    triangles' direct light does not vary; else its triangles' points as p sees them — each
+    weighted by the kernel, with its own direct light and, where it weighs over SEEN of the
+    total, its own ray from p (the link's visible fraction elsewhere): the parts actually seen,
+    not the element's vertex, whose view may be blocked where its triangles' is not."""
+    far = glow * f
+    if not varies(nf, t, b):
+        return far
     e = t.element[b]
-    if nf.detailed[e] == 0:  # its own direct light over all of its triangles
-        return glow
     a = s.area[e]
     d = s.centre[e] - p
     blend = wp.clamp((FAR - wp.dot(d, d) / a) / (FAR - NEAR), 0.0, 1.0)
     if blend <= 0.0:
-        return glow
-    own = nf.direct[e]
+        return far
+    unoccluded = point_ff(s, p, n, e)
+    if unoccluded <= 0.0:
+        return far
+    through = wp.clamp(f / unoccluded, 0.0, 1.0)
     ne = s.nrm[e]
-    total = float(0.0)  # Σ w, Σ w D
-    lit = wp.vec3(0.0)
+    size = wp.sqrt(a)
+    total = float(0.0)
     for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
         tri = s.fan_triangles[k]
         c0 = s.points[s.tris[3 * tri]]
         c1 = s.points[s.tris[3 * tri + 1]]
         c2 = s.points[s.tris[3 * tri + 2]]
         area2 = wp.length(wp.cross(c1 - c0, c2 - c0))
-        soft = area2 / (2.0 * PI * float(PER_TRIANGLE))  # a point's patch: no nearer than its size
+        for i in range(PER_TRIANGLE):
+            total += _weight(_point(nf, c0, c1, c2, i), p, n, ne, area2)
+    if total <= 0.0:
+        return far
+    own = nf.direct[e]
+    lit = wp.vec3(0.0)  # Σ w V D, Σ w V
+    seen = float(0.0)
+    for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
+        tri = s.fan_triangles[k]
+        c0 = s.points[s.tris[3 * tri]]
+        c1 = s.points[s.tris[3 * tri + 1]]
+        c2 = s.points[s.tris[3 * tri + 2]]
+        area2 = wp.length(wp.cross(c1 - c0, c2 - c0))
         row = nf.row[tri]
         for i in range(PER_TRIANGLE):
-            u = nf.bary[i]
-            v = c0 * u[0] + c1 * u[1] + c2 * u[2] - p
-            r2 = wp.dot(v, v) + soft
-            w = area2 * wp.max(wp.dot(n, v), 0.0) * wp.max(-wp.dot(ne, v), 0.0) / (r2 * r2)
-            total += w
-            if row >= 0:
-                lit += nf.light[row, i] * w
-            else:
-                lit += own * w
-    if total <= 0.0:
-        return glow
-    return glow + wp.cw_mul(s.albedo[e], lit / total - own) * blend
+            q = _point(nf, c0, c1, c2, i)
+            w = _weight(q, p, n, ne, area2)
+            if w > 0.0:
+                if w > SEEN * total:
+                    w *= visible(s.mesh, origin, lift(q, ne, size))
+                else:
+                    w *= through
+                seen += w
+                if row >= 0:
+                    lit += nf.light[row, i] * w
+                else:
+                    lit += own * w
+    # ρ (D_i + I) with ρ I = glow − ρ own, over the unoccluded form factor
+    near = (wp.cw_mul(s.albedo[e], lit) + (glow - wp.cw_mul(s.albedo[e], own)) * seen) * (unoccluded / total)
+    return far + (near - far) * blend
 
 
 @wp.kernel

@@ -35,7 +35,7 @@ from .. import links as links_mod
 from .. import nearfield
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet, Sampling, leaf_point, sample_leaf, sided_ff
-from ..nearfield import Detail, sent_at
+from ..nearfield import Detail, near_light, varies
 from ..rays import lift, visible
 from ..rootpath import WHOLE, path_link_begin, path_link_next, path_top, path_up
 from ..surfels import Surfels, fan_sample, point_ff
@@ -142,17 +142,20 @@ def _above_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.a
 
 @wp.func
 def path_gather(t: Nodes, s: Surfels, ls: LinkSet, nf: Detail, radiance: wp.array(dtype=wp.vec3),
-                above: wp.array(dtype=wp.vec3), limit: float, k: int, p: wp.vec3, n: wp.vec3):
-    """(lighting, links evaluated) that leaf k's root path brings to point p (unit normal n): the
-    links of nodes with at most ``limit`` leaves each at p (``transfer_at``, leaf k's own as they
-    are; near senders' light as p sees it, ``nearfield.sent_at``), those of larger nodes as they
-    bring it to the highest such node (``above``)."""
+                above: wp.array(dtype=wp.vec3), limit: float, k: int, p: wp.vec3, n: wp.vec3, size: float):
+    """(lighting, links evaluated) that leaf k's root path brings to point p (unit normal n, local
+    feature size ``size``): the links of nodes with at most ``limit`` leaves each at p
+    (``transfer_at``, leaf k's own as they are; near senders as p sees them,
+    ``nearfield.near_light``), those of larger nodes as they bring it to the highest such node
+    (``above``)."""
     acc = wp.vec3(0.0)
     count = int(0)
+    origin = lift(p, n, size)
     walk = path_link_begin(t, ls, k, limit)
     while walk.node >= 0:
-        acc += sent_at(nf, t, s, radiance, ls.sender[walk.link], p, n) * transfer_at(
-            t, s, ls, walk.link, p, n, int(walk.node != k), 1)
+        b = ls.sender[walk.link]
+        acc += near_light(nf, t, s, b, radiance[b], transfer_at(t, s, ls, walk.link, p, n, int(walk.node != k), 1),
+                          p, n, origin)
         count += 1
         walk = path_link_next(t, ls, walk)
     acc += above[path_top(t, k, limit)]  # 0 at the root
@@ -166,7 +169,7 @@ def _leaf_gather_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, nf: Deta
     """Leaf k's element: ``path_gather`` at its own point and normal."""
     k = wp.tid() + offset
     e = t.element[k]
-    light, count = path_gather(t, s, ls, nf, radiance, above, limit, k, s.pos[e], s.nrm[e])
+    light, count = path_gather(t, s, ls, nf, radiance, above, limit, k, s.pos[e], s.nrm[e], wp.sqrt(s.area[e]))
     out[e] = light
     evaluations[k] = count
 
@@ -303,8 +306,8 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                 break
             for j in range(ls.offsets[x], ls.offsets[x + 1]):
                 b = ls.sender[j]
-                glow = sent_at(nf, t, s, radiance, b, p, n)
-                if glow[0] + glow[1] + glow[2] <= 0.0:
+                glow = radiance[b]
+                if glow[0] + glow[1] + glow[2] <= 0.0 and not varies(nf, t, b):
                     continue
                 f = float(0.0)
                 if x == k and t.descend[b] < 0:
@@ -321,7 +324,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                             h += visible(s.mesh, origin, lift(q, s.nrm[e], wp.sqrt(s.area[e])))
                         f *= h / float(rays) * 255.0 / float(seen)  # the texel's visible fraction for the link's
                         count += rays
-                acc += glow * (shared * f)
+                acc += near_light(nf, t, s, b, glow, f, p, n, origin) * shared
             x = path_up(t, x, limit)
         acc += above[path_top(t, k, limit)] * w  # 0 at the root
     out[i] = acc
