@@ -1,21 +1,25 @@
-"""A sender's direct light as a receiver close to it sees it, not its element's (issue 21).
+"""A sender's light as a receiver close to it sees it, not its element's average (issue 21).
 
 An element sends one radiance, ρ ⊙ (D + I) with D its point's direct lighting, over its share of
-its triangles (a third of each, ``formfactor.fan_ff``). Far away that is what a receiver sees;
-within about an element's size it is not: the floor under an object standing on it passes from
-sun to shadow inside one element, and the object's underside sees mostly the dark part (measured
-on the open scene, a capsule on a floor under a sun: 82 % of the squared error against Cycles on
-the capsule's lowest 5 cm, which no finer link or extra ray moved).
+its triangles (a third of each, ``formfactor.fan_ff``), and is seen or hidden as its point is.
+Far away that is what a receiver sees; within about an element's size it is not: the floor under
+an object standing on it passes from sun to shadow inside one element, so the object's underside
+sees mostly the dark part, and a floor vertex hidden under the object hides none of its triangles
+that reach out into view (measured on the open scene, a capsule on a floor under a sun: 82 % of
+the squared error against Cycles on the capsule's lowest 5 cm, which no finer link or extra ray
+moved).
 
 So the triangles of every leaf that sends to a receiver within √FAR of its sizes get direct light
 traced at fixed points (PER_TRIANGLE each, an R2 set of barycentric coordinates; ``core.direct``,
-the light samples shared among the points) where its corners' direct light differs.
-A leaf seen from p within √FAR sizes then sends ρ ⊙ (D̃ + I), D̃ its triangles' direct light
-averaged with the point-to-point kernel cos θ cos θ' / r² from p (a corner's own value where
-none was kept; ``sent_at``), in full within NEAR sizes and blended out by FAR. Indirect light
-stays the element's: it varies slowly. (Weighting each point by its corner's hat function as
-well, so neighbours' radiances interpolate linearly, measured worse on the open scene: 0.90 %
-against 0.85 %.)
+the light samples shared among the points) where their corners' direct light differs. A gather at
+point p (elements and texels alike) then takes such a leaf within √FAR sizes as its triangles'
+points: each weighted by the kernel cos θ cos θ' / r² from p, with its own direct light, and where
+it weighs more than SEEN of the whole, its own ray from p (elsewhere the link's visible fraction):
+ρ ⊙ (D_i + I) summed so over the leaf's exact unoccluded form factor from p (``near_light``), in
+full within NEAR sizes and blended back to the link's value by FAR. Indirect light stays the
+element's: it varies slowly. (Weighting each point by its corner's hat function as well, so the
+corners' radiances interpolate linearly, measured no better on the open scene: 0.91 % against
+0.90 %, the contact ring darker in truth than either model.)
 """
 from __future__ import annotations
 
