@@ -9,11 +9,10 @@ that reach out into view (measured on the open scene, a capsule on a floor under
 the squared error against Cycles on the capsule's lowest 5 cm, which no finer link or extra ray
 moved).
 
-So the triangles of every leaf that sends to a receiver within √FAR of its sizes get direct light
-traced at fixed points (PER_TRIANGLE each, an R2 set of barycentric coordinates; ``core.direct``,
-the light samples shared among the points) where their corners' direct light differs. A gather at
-point p (elements and texels alike) then takes such a leaf within √FAR sizes as its triangles'
-points: each weighted by the kernel cos θ cos θ' / r² from p, with its own direct light, and where
+So every triangle gets direct light traced at fixed points (PER_TRIANGLE each, an R2 set of barycentric coordinates; ``core.direct``,
+the light samples shared among the points) where its corners' direct light differs. A final
+gather at point p (the hierarchical solver's at elements and texels, the reference's last sweep)
+then takes an element with such triangles within √FAR of its sizes as its triangles' points: each weighted by the kernel cos θ cos θ' / r² from p, with its own direct light, and where
 it weighs more than SEEN of the whole, its own ray from p (elsewhere the link's visible fraction):
 ρ ⊙ (D_i + I) summed so over the leaf's exact unoccluded form factor from p (``near_light``), in
 full within NEAR sizes and blended back to the link's value by FAR. Indirect light stays the
@@ -28,10 +27,7 @@ import math
 import numpy as np
 import warp as wp
 
-from . import device as device_mod
 from . import direct as direct_mod
-from .hierarchy import Nodes
-from .links import LinkSet
 from .rays import lift, visible
 from .surfels import Surfels, point_ff
 
@@ -44,7 +40,7 @@ PER_TRIANGLE = 32
 # triangles below NEAR × its area, as its element average beyond FAR × its area (blended between).
 NEAR = 4.0
 FAR = 16.0
-# A triangle of a near sender gets points traced when its corners' direct lighting differs by more
+# A triangle gets points traced when its corners' direct lighting differs by more
 # than this fraction of the brightest direct lighting of any element (elsewhere its corners' own
 # values stand).
 VARIES = 0.01
@@ -84,27 +80,26 @@ def _weight(q: wp.vec3, p: wp.vec3, n: wp.vec3, ne: wp.vec3, area2: float) -> fl
 
 
 @wp.func
-def varies(nf: Detail, t: Nodes, b: int) -> bool:
-    """Whether node b is a leaf whose triangles' direct light was traced (it may send light where
-    its own vertex has none)."""
-    if t.descend[b] >= 0 or nf.direct.shape[0] == 0:
+def varies(nf: Detail, e: int) -> bool:
+    """Whether element e's triangles had their direct light traced (it may send light where its
+    own vertex has none)."""
+    if nf.direct.shape[0] == 0:
         return False
-    return nf.detailed[t.element[b]] != 0
+    return nf.detailed[e] != 0
 
 
 @wp.func
-def near_light(nf: Detail, t: Nodes, s: Surfels, b: int, glow: wp.vec3, f: float, p: wp.vec3, n: wp.vec3,
+def near_light(nf: Detail, s: Surfels, e: int, glow: wp.vec3, f: float, p: wp.vec3, n: wp.vec3,
                origin: wp.vec3) -> wp.vec3:
-    """The light node b sends to point p (unit normal n; rays leave from ``origin``, p lifted)
-    over a link whose transfer at p is f: glow × f far away, for a cluster or for a leaf whose
-    triangles' direct light does not vary; else its triangles' points as p sees them — each
+    """The light element e (radiance ``glow``) sends to point p (unit normal n; rays leave from
+    ``origin``, p lifted) whose transfer from it is f: glow × f far away or where e's triangles'
+    direct light does not vary; else its triangles' points as p sees them — each
     weighted by the kernel, with its own direct light and, where it weighs over SEEN of the
     total, its own ray from p (the link's visible fraction elsewhere): the parts actually seen,
     not the element's vertex, whose view may be blocked where its triangles' is not."""
     far = glow * f
-    if not varies(nf, t, b):
+    if not varies(nf, e):
         return far
-    e = t.element[b]
     a = s.area[e]
     d = s.centre[e] - p
     blend = wp.clamp((FAR - wp.dot(d, d) / a) / (FAR - NEAR), 0.0, 1.0)
@@ -155,21 +150,6 @@ def near_light(nf: Detail, t: Nodes, s: Surfels, b: int, glow: wp.vec3, f: float
     return far + (near - far) * blend
 
 
-@wp.kernel
-def _mark_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, mark: wp.array(dtype=wp.int32)):
-    """Receiver node x: mark the elements of the leaves that send to it from within √FAR of
-    their sizes of its widened bounding sphere (texels lie up to a triangle beyond it)."""
-    x = wp.tid() + offset
-    reach = 2.0 * t.radius[x]
-    for j in range(ls.offsets[x], ls.offsets[x + 1]):
-        b = ls.sender[j]
-        if t.descend[b] < 0 and ls.transfer[j] > 0.0:
-            e = t.element[b]
-            gap = wp.max(wp.length(s.centre[e] - t.position[x]) - reach, 0.0)
-            if gap * gap < FAR * s.area[e]:
-                mark[e] = 1  # every writer writes 1: no race that matters
-
-
 def barycentric(count: int) -> np.ndarray:
     """float32[count,3]: an R2 low-discrepancy set of points of a triangle, barycentric, uniform
     by area (the square folded onto the triangle)."""
@@ -191,25 +171,18 @@ def empty(n: int, device: str) -> Detail:
     return nf
 
 
-def build(problem, links) -> Detail:
-    """The ``Detail`` of the senders of ``links`` (``core.links.Links``) near their receivers:
-    direct light traced at the points of their triangles, kept where it varies (rays counted in
-    ``problem.counts``)."""
-    tree, dev, els, scene = problem.tree, problem.device, problem.elements, problem.scene
+def build(problem) -> Detail:
+    """The ``Detail`` of ``problem``: direct light traced at the points of every triangle whose
+    corners' direct light differs (rays counted in ``problem.counts``). Traced for every element,
+    not only those near a receiver, so that every solver gets the same (the reference's final
+    sweep and the hierarchical final gather over leaf links only agree exactly)."""
+    dev, els, scene = problem.device, problem.elements, problem.scene
     d = dev.name
     n = els.count
-    mark = wp.zeros(n, dtype=wp.int32, device=d)
-    device_mod.launch(_mark_kernel, tree.count, [tree.nodes, problem.surfels, links.set, mark], dev)
-    chosen = np.flatnonzero(mark.numpy())
-    starts = els.fan_offsets[chosen].astype(np.int64)
-    lengths = els.fan_offsets[chosen + 1] - starts
-    # the chosen elements' triangles: each fan's range of fan_triangles, one after another
-    tris = np.unique(els.fan_triangles[np.arange(lengths.sum()) + np.repeat(starts - (np.cumsum(lengths) - lengths),
-                                                                            lengths)])
     # only where its corners' direct light differs can a triangle's vary much (a shadow that
     # crosses a triangle without touching a corner is missed)
-    spread = np.ptp(problem.direct[els.corner[tris]], axis=1).max(axis=1)
-    tris = tris[spread > VARIES * max(float(problem.direct.max(initial=0.0)), 1e-30)]
+    spread = np.ptp(problem.direct[els.corner], axis=1).max(axis=1)
+    tris = np.flatnonzero(spread > VARIES * max(float(problem.direct.max(initial=0.0)), 1e-30))
     bary = barycentric(PER_TRIANGLE)
     row = np.full(scene.num_triangles, -1, np.int32)
     row[tris] = np.arange(len(tris), dtype=np.int32)
@@ -227,7 +200,6 @@ def build(problem, links) -> Detail:
             max(1, math.ceil(settings.light_samples / PER_TRIANGLE)), settings.seed + 7919)
         problem.counts["rays"] += int(rays.sum())
         light = traced.reshape(-1, PER_TRIANGLE, 3)
-    problem.counts["near_senders"] = int(len(chosen))
     problem.counts["near_triangles_traced"] = int(len(tris))
     nf = Detail()
     nf.direct = wp.array(problem.direct, dtype=wp.vec3, device=d)

@@ -3,8 +3,8 @@
 It holds the scene (recentred: see ``SceneData.recentred``), the settings, the device, the stages
 (progress, cancellation, timings, warnings), the shading vertices and elements, and everything the
 kernels read, uploaded to the device once: the BVH of all triangles, the lights, and the elements
-as one ``surfels.Surfels`` struct. Direct light per element, the cluster tree and (for link-based
-solvers) links are computed the first time they are asked for and kept (links per oracle, until
+as one ``surfels.Surfels`` struct. Direct light per element (and at points of the triangles
+across which it varies), the cluster tree and (for link-based solvers) links are computed the first time they are asked for and kept (links per oracle, until
 the scene moves).
 """
 from __future__ import annotations
@@ -109,6 +109,7 @@ class Problem:
         self.lights = direct_mod.Lights(scene, self.device)
         surfels_mod.assign(self.surfels, els)
         self.__dict__.pop("direct", None)
+        self.__dict__.pop("near", None)
         self.counts["rays"] = 0
         self._links.clear()  # links are made again from scratch over the refitted tree
         if "tree" in self.__dict__:
@@ -129,6 +130,14 @@ class Problem:
                                       els.normal, self.element_sizes, self.stages.reporter("direct"))
         self.counts["rays"] += rays
         return light
+
+    @cached_property
+    def near(self):
+        """The direct light of triangles across which it varies, at fixed points
+        (``nearfield.Detail``), traced once: what final gathers near them see."""
+        from . import nearfield
+
+        return self.stages.run("near field", nearfield.build, self)
 
     @cached_property
     def tree(self):

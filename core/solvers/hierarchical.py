@@ -79,13 +79,6 @@ def links_of(problem):
     return problem.links(oracle(problem.settings), lambda: first_radiance(problem))
 
 
-def detail_of(problem, links) -> Detail:
-    """The near senders' detail over ``links`` (``nearfield.build``, once per build of them)."""
-    if "near detail" not in links.derived:
-        links.derived["near detail"] = problem.stages.run("near field", nearfield.build, problem, links)
-    return links.derived["near detail"]
-
-
 @wp.kernel
 def _gather_kernel(offset: int, ls: LinkSet, radiance: wp.array(dtype=wp.vec3),
                    out: wp.array(dtype=wp.vec3)):
@@ -141,6 +134,16 @@ def _above_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, radiance: wp.a
 
 
 @wp.func
+def sent(nf: Detail, t: Nodes, s: Surfels, radiance: wp.array(dtype=wp.vec3), b: int, f: float, p: wp.vec3,
+         n: wp.vec3, origin: wp.vec3) -> wp.vec3:
+    """What node b sends to point p over a link of transfer f at p: a leaf as p sees it
+    (``nearfield.near_light``), a cluster its radiance × f."""
+    if t.descend[b] < 0:
+        return near_light(nf, s, t.element[b], radiance[b], f, p, n, origin)
+    return radiance[b] * f
+
+
+@wp.func
 def path_gather(t: Nodes, s: Surfels, ls: LinkSet, nf: Detail, radiance: wp.array(dtype=wp.vec3),
                 above: wp.array(dtype=wp.vec3), limit: float, k: int, p: wp.vec3, n: wp.vec3, size: float):
     """(lighting, links evaluated) that leaf k's root path brings to point p (unit normal n, local
@@ -153,9 +156,8 @@ def path_gather(t: Nodes, s: Surfels, ls: LinkSet, nf: Detail, radiance: wp.arra
     origin = lift(p, n, size)
     walk = path_link_begin(t, ls, k, limit)
     while walk.node >= 0:
-        b = ls.sender[walk.link]
-        acc += near_light(nf, t, s, b, radiance[b], transfer_at(t, s, ls, walk.link, p, n, int(walk.node != k), 1),
-                          p, n, origin)
+        acc += sent(nf, t, s, radiance, ls.sender[walk.link],
+                    transfer_at(t, s, ls, walk.link, p, n, int(walk.node != k), 1), p, n, origin)
         count += 1
         walk = path_link_next(t, ls, walk)
     acc += above[path_top(t, k, limit)]  # 0 at the root
@@ -200,7 +202,7 @@ class Iteration:
         (``_leaf_gather_kernel``); returns the link evaluations made."""
         p = self.problem
         exitance(p, direct, indirect, self.exitance)
-        return _leaf_gather(p, self.links, detail_of(p, self.links), self.exitance, self.radiance, out)
+        return _leaf_gather(p, self.links, p.near, self.exitance, self.radiance, out)
 
 
 def _above(problem, links, radiance: wp.array) -> wp.array:
@@ -307,8 +309,11 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
             for j in range(ls.offsets[x], ls.offsets[x + 1]):
                 b = ls.sender[j]
                 glow = radiance[b]
-                if glow[0] + glow[1] + glow[2] <= 0.0 and not varies(nf, t, b):
-                    continue
+                if glow[0] + glow[1] + glow[2] <= 0.0:
+                    if t.descend[b] >= 0:
+                        continue
+                    if not varies(nf, t.element[b]):  # a dark leaf may still show lit points
+                        continue
                 f = float(0.0)
                 if x == k and t.descend[b] < 0:
                     f = point_ff(s, p, n, t.element[b]) * visible(s.mesh, origin, leaf_point(t, s, b))
@@ -324,7 +329,7 @@ def _texel_gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(
                             h += visible(s.mesh, origin, lift(q, s.nrm[e], wp.sqrt(s.area[e])))
                         f *= h / float(rays) * 255.0 / float(seen)  # the texel's visible fraction for the link's
                         count += rays
-                acc += near_light(nf, t, s, b, glow, f, p, n, origin) * shared
+                acc += sent(nf, t, s, radiance, b, f, p, n, origin) * shared
             x = path_up(t, x, limit)
         acc += above[path_top(t, k, limit)] * w  # 0 at the root
     out[i] = acc
@@ -353,7 +358,7 @@ def texel_gather(problem, links, lighting: np.ndarray, receivers, progress=None)
         [arr(receivers.points.astype(np.float32), wp.vec3), arr(receivers.normals.astype(np.float32), wp.vec3),
          arr(receivers.sizes.astype(np.float32), wp.float32), arr(receivers.elements.astype(np.int32), wp.int32),
          arr(receivers.weights.astype(np.float32), wp.float32), arr(leaf_of, wp.int32), tree.nodes,
-         problem.surfels, links.set, detail_of(problem, links), sm, radiance, _above(problem, links, radiance),
+         problem.surfels, links.set, problem.near, sm, radiance, _above(problem, links, radiance),
          float(LEAF_LIMIT),
          int(settings.visibility_rays), int(settings.seed) + 104729, out, traced],
         dev, chunks=max(1, min(32, count // 4096)), on_chunk=progress)

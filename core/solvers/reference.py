@@ -6,7 +6,8 @@ of element j (disk approximation far away, exact triangle form factors of j's fa
 when d² < NEAR·A_j, ``core.surfels``), V_ij the unblocked fraction of rays from i to jittered
 points of j's own triangles (the same for i→j and j→i, traced once). Then Jacobi sweeps
 ``I ← M (ρ ⊙ (D + I))`` on the device in lighting units (irradiance/π), D the direct lighting,
-until the largest change is below the tolerance.
+until the largest change is below the tolerance; the last sweep takes the elements near each
+receiver as it sees them (``core.nearfield``), as the hierarchical solver's final gather does.
 
 What is kept between sweeps depends on the memory budget (``max_pairs`` × 4 bytes): the whole
 float32 matrix when it fits (``matrix``), else the visibility of every pair as one byte
@@ -20,6 +21,8 @@ import warp as wp
 
 from .. import device as device_mod
 from ..errors import BakeError
+from ..nearfield import Detail, empty, near_light, varies
+from ..rays import lift
 from ..surfels import Surfels, element_ff, pair_hits
 from .base import Solution, exitance, iterate, reconstruct_with_detail
 
@@ -70,30 +73,37 @@ def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
 
 @wp.kernel
 def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: int,
-                  visibility: wp.array2d(dtype=wp.uint8),
+                  matrix: wp.array2d(dtype=wp.float32), visibility: wp.array2d(dtype=wp.uint8), nf: Detail,
                   direct: wp.array(dtype=wp.vec3), indirect: wp.array(dtype=wp.vec3),
                   out: wp.array(dtype=wp.vec3), traced: wp.array(dtype=wp.int32)):
-    """One Jacobi sweep of row i without the matrix held: out_i = Σ_j M_ij ρ_j (D_j + I_j), the form
-    factors computed again, the visibility kept (VISIBILITY) or traced again (TRACED); ``traced[i]``
-    its rays."""
+    """One Jacobi sweep of row i: out_i = Σ_j M_ij ρ_j (D_j + I_j), M_ij held (MATRIX), or its
+    form factors computed again with the visibility kept (VISIBILITY) or traced again (TRACED);
+    each element near i as i sees it (``nearfield.near_light``; none with an empty ``nf``).
+    ``traced[i]``: its rays."""
     i = wp.tid() + offset
     acc = wp.vec3(0.0)
     count = int(0)
     if s.area[i] > 0.0:
+        p = s.pos[i]
+        normal = s.nrm[i]
+        origin = lift(p, normal, wp.sqrt(s.area[i]))
         for j in range(n):
             if j == i:
                 continue
             m = float(0.0)
             if s.area[j] > 0.0:
-                f = element_ff(s, i, j)
-                if f > 0.0:
-                    if mode == VISIBILITY:
-                        m = f * float(visibility[i, j]) / float(rays)
-                    else:
-                        m = f * float(pair_hits(s, i, j, rays, seed)) / float(rays)
-                        count += rays
-            if m > 0.0:
-                acc += m * wp.cw_mul(s.albedo[j], direct[j] + indirect[j])
+                if mode == MATRIX:
+                    m = matrix[i, j]
+                else:
+                    f = element_ff(s, i, j)
+                    if f > 0.0:
+                        if mode == VISIBILITY:
+                            m = f * float(visibility[i, j]) / float(rays)
+                        else:
+                            m = f * float(pair_hits(s, i, j, rays, seed)) / float(rays)
+                            count += rays
+            if m > 0.0 or varies(nf, j):
+                acc += near_light(nf, s, j, wp.cw_mul(s.albedo[j], direct[j] + indirect[j]), m, p, normal, origin)
     out[i] = acc
     traced[i] = count
 
@@ -132,6 +142,7 @@ class Transport:
         self.visibility = wp.zeros((n, n) if self.mode == VISIBILITY else (1, 1), dtype=wp.uint8,
                                    device=d)
         self.traced = wp.zeros(n, dtype=wp.int32, device=d)  # rays per row (thread) of a launch
+        self.none = empty(n, d)  # no near field: the sweeps before the last
         self._rays = 0
         self.rays = int(settings.visibility_rays)
         self.seed = int(settings.seed) + 7919
@@ -147,18 +158,20 @@ class Transport:
                           self.problem.device, chunks=max(1, min(64, n // 128)), on_chunk=progress)
         self._count()
 
-    def sweep(self, direct: wp.array, indirect: wp.array, out: wp.array, progress=None) -> None:
-        """out ← M (ρ ⊙ (direct + indirect)) (vec3[n] device arrays)."""
+    def sweep(self, direct: wp.array, indirect: wp.array, out: wp.array, progress=None,
+              near: Detail | None = None) -> None:
+        """out ← M (ρ ⊙ (direct + indirect)) (vec3[n] device arrays), with ``near`` (the problem's
+        ``Problem.near``) each element near a receiver as the receiver sees it."""
         n = self.n
-        if self.mode == MATRIX:
+        if self.mode == MATRIX and near is None:
             device = self.problem.device
             exitance(self.problem, direct, indirect, self.exitance)
             device_mod.launch(_matrix_sweep_kernel, n, [n, self.matrix, self.exitance, out], device,
                               on_chunk=progress)
             return
         device_mod.launch(_sweep_kernel, n,
-                          [n, self.problem.surfels, self.rays, self.seed, self.mode, self.visibility,
-                           direct, indirect, out, self.traced],
+                          [n, self.problem.surfels, self.rays, self.seed, self.mode, self.matrix, self.visibility,
+                           near if near is not None else self.none, direct, indirect, out, self.traced],
                           self.problem.device, chunks=max(1, min(16, n // 256)),
                           on_chunk=progress)
         if self.mode == TRACED:
@@ -232,9 +245,12 @@ def solve(problem) -> Solution:
     def sweep(direct, current, out, k):
         transport.sweep(direct, current, out, lambda f: stages.report("bounces", (k - 1 + f) / settings.bounces))
 
-    values, sweeps, _, _ = iterate(problem, sweep, settings.bounces)
-    return Solution(values, {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps,
-                             "transport": MODES[transport.mode]})
+    # the last sweep sees the elements near each receiver as it sees them (``core.nearfield``)
+    _, sweeps, dev_direct, current = iterate(problem, sweep, settings.bounces - 1)
+    last = wp.empty(n, dtype=wp.vec3, device=problem.device.name)
+    transport.sweep(dev_direct, current, last, near=problem.near)
+    return Solution(last.numpy(), {"pairs": n * n, "rays": transport.rays_traced, "iterations": sweeps + 1,
+                                   "transport": MODES[transport.mode]})
 
 
 def evaluate(problem, solution: Solution, receivers) -> np.ndarray:
