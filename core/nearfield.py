@@ -44,7 +44,8 @@ FAR = 16.0
 # than this fraction of the brightest direct lighting of any element (elsewhere its corners' own
 # values stand).
 VARIES = 0.01
-# Points of a near sender that weigh more than this fraction of the whole get their own ray.
+# Points of a near sender that weigh, or bring light, more than this fraction of the whole get
+# their own ray.
 SEEN = 0.01
 PI = math.pi
 
@@ -94,9 +95,9 @@ def near_light(nf: Detail, s: Surfels, e: int, glow: wp.vec3, f: float, p: wp.ve
     """The light element e (radiance ``glow``) sends to point p (unit normal n; rays leave from
     ``origin``, p lifted) whose transfer from it is f: glow × f far away or where e's triangles'
     direct light does not vary; else its triangles' points as p sees them — each
-    weighted by the kernel, with its own direct light and, where it weighs over SEEN of the
-    total, its own ray from p (the link's visible fraction elsewhere): the parts actually seen,
-    not the element's vertex, whose view may be blocked where its triangles' is not."""
+    weighted by the kernel, with its own direct light and, where it weighs or brings over SEEN of
+    the total, its own ray from p (the link's visible fraction elsewhere): the parts actually
+    seen, not the element's vertex, whose view may be blocked where its triangles' is not."""
     far = glow * f
     if not varies(nf, e):
         return far
@@ -111,20 +112,24 @@ def near_light(nf: Detail, s: Surfels, e: int, glow: wp.vec3, f: float, p: wp.ve
     through = wp.clamp(f / unoccluded, 0.0, 1.0)
     ne = s.nrm[e]
     size = wp.sqrt(a)
-    total = float(0.0)
+    own = nf.direct[e]
+    indirect = glow - wp.cw_mul(s.albedo[e], own)  # ρ I, the same at every point
+    total = float(0.0)  # Σ w, and Σ w × each point's radiance (luminance): which points get rays
+    bright = float(0.0)
     for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
         tri = s.fan_triangles[k]
         c0 = s.points[s.tris[3 * tri]]
         c1 = s.points[s.tris[3 * tri + 1]]
         c2 = s.points[s.tris[3 * tri + 2]]
         area2 = wp.length(wp.cross(c1 - c0, c2 - c0))
+        row = nf.row[tri]
         for i in range(PER_TRIANGLE):
-            total += _weight(_point(nf, c0, c1, c2, i), p, n, ne, area2)
+            w = _weight(_point(nf, c0, c1, c2, i), p, n, ne, area2)
+            total += w
+            bright += w * _luminance(_radiance(nf, s, e, row, i, own, indirect))
     if total <= 0.0:
         return far
-    own = nf.direct[e]
-    lit = wp.vec3(0.0)  # Σ w V D, Σ w V
-    seen = float(0.0)
+    lit = wp.vec3(0.0)  # Σ w V (ρ D + ρ I)
     for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
         tri = s.fan_triangles[k]
         c0 = s.points[s.tris[3 * tri]]
@@ -136,18 +141,29 @@ def near_light(nf: Detail, s: Surfels, e: int, glow: wp.vec3, f: float, p: wp.ve
             q = _point(nf, c0, c1, c2, i)
             w = _weight(q, p, n, ne, area2)
             if w > 0.0:
-                if w > SEEN * total:
+                glow_i = _radiance(nf, s, e, row, i, own, indirect)
+                # a point that brings much of the light gets its own ray: a hidden bright spot (the
+                # ceiling lit 1 mm above a lamp's back) must not shine through the link's fraction
+                if w * _luminance(glow_i) > SEEN * bright or w > SEEN * total:
                     w *= visible(s.mesh, origin, lift(q, ne, size))
                 else:
                     w *= through
-                seen += w
-                if row >= 0:
-                    lit += nf.light[row, i] * w
-                else:
-                    lit += own * w
-    # ρ (D_i + I) with ρ I = glow − ρ own, over the unoccluded form factor
-    near = (wp.cw_mul(s.albedo[e], lit) + (glow - wp.cw_mul(s.albedo[e], own)) * seen) * (unoccluded / total)
+                lit += glow_i * w
+    near = lit * (unoccluded / total)  # the kernel's sum over the unoccluded form factor
     return far + (near - far) * blend
+
+
+@wp.func
+def _radiance(nf: Detail, s: Surfels, e: int, row: int, i: int, own: wp.vec3, indirect: wp.vec3) -> wp.vec3:
+    """Element e's radiance ρ (D_i + I) at point i of a triangle whose points have ``row``."""
+    if row >= 0:
+        return wp.cw_mul(s.albedo[e], nf.light[row, i]) + indirect
+    return wp.cw_mul(s.albedo[e], own) + indirect
+
+
+@wp.func
+def _luminance(c: wp.vec3) -> float:
+    return wp.max(c[0] + c[1] + c[2], 0.0)
 
 
 def barycentric(count: int) -> np.ndarray:
