@@ -25,7 +25,9 @@ sample count and at a high sample count taken as the truth:
 
 With ``--lightmap`` (issue #13) it compares lightmaps instead: see :func:`run_lightmap`.
 
-Every bake is timed (wall clock, extraction included for ours, scene sync included for Cycles).
+Every bake is timed (wall clock, extraction included for ours, scene sync included for Cycles),
+after one untimed bake of ours that loads Warp's kernels (the add-on loads them when Blender
+starts).
 The equal-error speedup is the time Cycles needs to reach our error — interpolated on its log
 error / log time curve, or extrapolated along its last segment when our error lies outside the
 measured range (marked) — divided by our time. Writes bench/results/accuracy-<machine>-<date>.json
@@ -116,6 +118,8 @@ def run_quantity(names, quantity, runs, samples, reference_samples, passes=PASSE
     series, truth = cycles_series(names, samples, reference_samples, q["bake_type"], passes)
     cycles = [{"samples": s, "seconds": round(t, 3), **q["summary"](v, truth)} for s, (v, t) in series.items()]
     ours = []
+    if runs:  # untimed: Warp loads its kernels at the first bake (the add-on does at start-up)
+        bake_vertex_values(names, next(iter(runs.values())))
     for label, settings in runs.items():
         values, result, seconds = bake_vertex_values(names, settings)
         row = {"method": label, "seconds": round(seconds, 3), "device": result.device,
