@@ -66,10 +66,18 @@ class Detail:
 
 
 @wp.func
-def _point(nf: Detail, c0: wp.vec3, c1: wp.vec3, c2: wp.vec3, i: int) -> wp.vec3:
-    """Point i of the triangle with corners c0, c1, c2."""
+def _point(nf: Detail, s: Surfels, tri: int, i: int) -> wp.vec3:
+    """Point i of triangle tri."""
     u = nf.bary[i]
-    return c0 * u[0] + c1 * u[1] + c2 * u[2]
+    return (s.points[s.tris[3 * tri]] * u[0] + s.points[s.tris[3 * tri + 1]] * u[1]
+            + s.points[s.tris[3 * tri + 2]] * u[2])
+
+
+@wp.func
+def _area2(s: Surfels, tri: int) -> float:
+    """Twice the area of triangle tri (m²)."""
+    c0 = s.points[s.tris[3 * tri]]
+    return wp.length(wp.cross(s.points[s.tris[3 * tri + 1]] - c0, s.points[s.tris[3 * tri + 2]] - c0))
 
 
 @wp.func
@@ -119,13 +127,10 @@ def near_light(nf: Detail, s: Surfels, e: int, glow: wp.vec3, f: float, p: wp.ve
     bright = float(0.0)
     for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
         tri = s.fan_triangles[k]
-        c0 = s.points[s.tris[3 * tri]]
-        c1 = s.points[s.tris[3 * tri + 1]]
-        c2 = s.points[s.tris[3 * tri + 2]]
-        area2 = wp.length(wp.cross(c1 - c0, c2 - c0))
+        area2 = _area2(s, tri)
         row = nf.row[tri]
         for i in range(PER_TRIANGLE):
-            w = _weight(_point(nf, c0, c1, c2, i), p, n, ne, area2)
+            w = _weight(_point(nf, s, tri, i), p, n, ne, area2)
             total += w
             bright += w * _luminance(_radiance(nf, s, e, row, i, own, indirect))
     if total <= 0.0:
@@ -133,13 +138,10 @@ def near_light(nf: Detail, s: Surfels, e: int, glow: wp.vec3, f: float, p: wp.ve
     lit = wp.vec3(0.0)  # Σ w V (ρ D + ρ I)
     for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
         tri = s.fan_triangles[k]
-        c0 = s.points[s.tris[3 * tri]]
-        c1 = s.points[s.tris[3 * tri + 1]]
-        c2 = s.points[s.tris[3 * tri + 2]]
-        area2 = wp.length(wp.cross(c1 - c0, c2 - c0))
+        area2 = _area2(s, tri)
         row = nf.row[tri]
         for i in range(PER_TRIANGLE):
-            q = _point(nf, c0, c1, c2, i)
+            q = _point(nf, s, tri, i)
             w = _weight(q, p, n, ne, area2)
             if w > 0.0:
                 glow_i = _radiance(nf, s, e, row, i, own, indirect)
