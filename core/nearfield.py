@@ -179,7 +179,7 @@ def barycentric(count: int) -> np.ndarray:
     return np.column_stack([1.0 - u.sum(axis=1), u]).astype(np.float32)
 
 
-def empty(n: int, device: str) -> Detail:
+def empty(device: str) -> Detail:
     """A ``Detail`` that leaves every sender as its element average."""
     nf = Detail()
     nf.direct = wp.zeros(0, dtype=wp.vec3, device=device)

@@ -4,8 +4,8 @@ It holds the scene (recentred: see ``SceneData.recentred``), the settings, the d
 (progress, cancellation, timings, warnings), the shading vertices and elements, and everything the
 kernels read, uploaded to the device once: the BVH of all triangles, the lights, and the elements
 as one ``surfels.Surfels`` struct. Direct light per element (and at points of the triangles
-across which it varies), the cluster tree and (for link-based solvers) links are computed the first time they are asked for and kept (links per oracle, until
-the scene moves).
+across which it varies), the cluster tree and (for link-based solvers) links are computed the
+first time they are asked for and kept (links per oracle, until the scene moves).
 """
 from __future__ import annotations
 

@@ -235,7 +235,8 @@ def leaf_gather(problem, links, exitance: np.ndarray) -> np.ndarray:
     senders' detail of the direct light: ``exitance`` is any)."""
     d = problem.device.name
     out = wp.empty(problem.elements.count, dtype=wp.vec3, device=d)
-    _leaf_gather(problem, links, nearfield.empty(problem.elements.count, d), wp.array(np.ascontiguousarray(exitance, np.float32), dtype=wp.vec3, device=d),
+    _leaf_gather(problem, links, nearfield.empty(d),
+                 wp.array(np.ascontiguousarray(exitance, np.float32), dtype=wp.vec3, device=d),
                  wp.empty(problem.tree.count, dtype=wp.vec3, device=d), out)
     return out.numpy()
 

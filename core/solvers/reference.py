@@ -142,7 +142,7 @@ class Transport:
         self.visibility = wp.zeros((n, n) if self.mode == VISIBILITY else (1, 1), dtype=wp.uint8,
                                    device=d)
         self.traced = wp.zeros(n, dtype=wp.int32, device=d)  # rays per row (thread) of a launch
-        self.none = empty(n, d)  # no near field: the sweeps before the last
+        self.none = empty(d)  # no near field: the sweeps before the last
         self._rays = 0
         self.rays = int(settings.visibility_rays)
         self.seed = int(settings.seed) + 7919
