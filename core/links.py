@@ -166,12 +166,14 @@ class Sampling:
     """How the sample leaves of a link are drawn: first_leaf int32[m] of each node; cum
     float64[n+1] the running sum over the leaves (leaf order) of area × (glow + floor); glow
     float32[n] each leaf's radiance estimate (1 without one); floor: the added floor (0 without an
-    estimate)."""
+    estimate); open float32[n] each leaf's share of its view not inside a closed surface
+    (``enclosure``; 1 without visibility): what a cluster's receiving samples are weighted by."""
 
     first_leaf: wp.array(dtype=wp.int32)
     cum: wp.array(dtype=wp.float64)
     glow: wp.array(dtype=wp.float32)
     floor: float
+    open: wp.array(dtype=wp.float32)
 
 
 @wp.func
@@ -396,6 +398,13 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
             da = sm.glow[la] + sm.floor
         if lb != b:
             db = sm.glow[lb] + sm.floor
+        # a cluster's receiving samples count as much as their leaf's view is open (``enclosure``)
+        oa = float(1.0)
+        ob = float(1.0)
+        if la != a:
+            oa = sm.open[la]
+        if lb != b:
+            ob = sm.open[lb]
         ea = t.element[la]
         eb = t.element[lb]
         f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
@@ -411,17 +420,17 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
             else:
                 skipped += 1
         seen += hit
-        s_ab += _sample_terms(f_ab / s.area[eb], sm.glow[lb] / (da * db), hit)
-        s_ba += _sample_terms(f_ba / s.area[ea], sm.glow[la] / (da * db), hit)
+        s_ab += _sample_terms(f_ab / s.area[eb], oa * sm.glow[lb] / (da * db), hit)
+        s_ba += _sample_terms(f_ba / s.area[ea], ob * sm.glow[la] / (da * db), hit)
         # the centroid form factors: a leaf's is the element form factor just evaluated
         if lb != b:
             f_ab = sided_ff(t, s, s.pos[ea], s.nrm[ea], b, sides)
         if la != a:
             f_ba = sided_ff(t, s, s.pos[eb], s.nrm[eb], a, sides)
-        r_a += 1.0 / da
-        c_ab += f_ab / da
-        r_b += 1.0 / db
-        c_ba += f_ba / db
+        r_a += oa / da
+        c_ab += oa * f_ab / da
+        r_b += ob / db
+        c_ba += ob * f_ba / db
         if probe and seen > 0.0 and seen < float(k + 1):  # a hit and a miss: the pair is split
             break
     t_ab = s_ab[3] / float(rays)
@@ -434,8 +443,8 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
     if s_ba[0] > 0.0:
         t_ba = s_ba[1] / s_ba[0]
         u_ba = s_ba[2] / s_ba[0]
-    out = wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / r_a),
-                  _normaliser(u_ba * t.area[a], c_ba / r_b))
+    out = wp.vec4(t_ab * t.area[b], t_ba * t.area[a], _normaliser(u_ab * t.area[b], c_ab / wp.max(r_a, 1.0e-30)),
+                  _normaliser(u_ba * t.area[a], c_ba / wp.max(r_b, 1.0e-30)))
     if skipped > 0 and (not (u_ab > 0.0) or not (u_ba > 0.0)) and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
         # ``_fraction`` falls back on the plain fraction: the skipped samples' rays, drawn again
         state = wp.rand_init(seed + wp.max(a, b), wp.min(a, b))
@@ -719,14 +728,18 @@ def weights(tree, lum: np.ndarray) -> wp.array:
     return wp.array(np.clip(out.numpy(), WEIGHT_LOW, WEIGHT_HIGH), dtype=wp.float32, device=dev.name)
 
 
-def sampling(tree, lum: np.ndarray | None = None, floor: float = 0.0) -> Sampling:
+def sampling(tree, lum: np.ndarray | None = None, floor: float = 0.0,
+             open_fraction: np.ndarray | None = None) -> Sampling:
     """How sample leaves are drawn (``Sampling``): in proportion to area × (lum + floor × the
     area-weighted mean of lum), lum float64[n] a radiance estimate per leaf (leaf order); by area
-    alone without one."""
+    alone without one. ``open_fraction``: float32[n] per element (``enclosure``), 1 without."""
     dev = tree.device
     d = dev.name
     area = _leaf_area(tree)
     sm = Sampling()
+    order = tree.order.numpy()
+    sm.open = wp.array(np.ones(len(area), np.float32) if open_fraction is None else open_fraction[order],
+                       dtype=wp.float32, device=d)
     sm.first_leaf = wp.empty(tree.count, dtype=wp.int32, device=d)
     device_mod.launch(_first_leaf_kernel, tree.count, [tree.nodes, sm.first_leaf], dev)
     if lum is None:
@@ -922,7 +935,9 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     t0 = time.perf_counter()
     lum = None if radiance is None else leaf_luminance(tree, radiance)
     weight = None if lum is None else weights(tree, lum)
-    sm = sampling(tree, lum, SAMPLE_FLOOR)
+    # a cluster's visibility is sampled over its open leaves: those buried inside a closed
+    # surface get their own share at the push (``enclosure``)
+    sm = sampling(tree, lum, SAMPLE_FLOOR, problem.open_fraction.numpy() if oracle.visibility else None)
     threshold = float(oracle.threshold)
     traced = [0]
     # Over the budget, the threshold is raised in trial builds without rays (cheap; the links a

@@ -110,6 +110,7 @@ class Problem:
         surfels_mod.assign(self.surfels, els)
         self.__dict__.pop("direct", None)
         self.__dict__.pop("near", None)
+        self.__dict__.pop("open_fraction", None)
         self.counts["rays"] = 0
         self._links.clear()  # links are made again from scratch over the refitted tree
         if "tree" in self.__dict__:
@@ -138,6 +139,15 @@ class Problem:
         from . import nearfield
 
         return self.stages.run("near field", nearfield.build, self)
+
+    @cached_property
+    def open_fraction(self) -> wp.array:
+        """float32[n] on the device: the share of each element's view not shut inside a closed
+        surface (``enclosure.open_fraction``), traced once."""
+        from . import enclosure
+
+        return wp.array(self.stages.run("enclosure", enclosure.open_fraction, self), dtype=wp.float32,
+                        device=self.device.name)
 
     @cached_property
     def tree(self):

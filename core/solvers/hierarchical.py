@@ -91,15 +91,18 @@ def _gather_kernel(offset: int, ls: LinkSet, radiance: wp.array(dtype=wp.vec3),
 
 
 @wp.kernel
-def _push_kernel(offset: int, t: Nodes, gathered: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
-    """Leaf k's element: the sum of what its root path received."""
+def _push_kernel(offset: int, t: Nodes, gathered: wp.array(dtype=wp.vec3), open_fraction: wp.array(dtype=wp.float32),
+                 out: wp.array(dtype=wp.vec3)):
+    """Leaf k's element: the sum of what its root path received, its ancestors' share scaled by
+    the element's ``open_fraction`` (their links' rays left from other leaves)."""
     k = wp.tid() + offset
+    e = t.element[k]
     acc = wp.vec3(0.0)
-    x = k
+    x = path_up(t, k, WHOLE)
     while x >= 0:
         acc += gathered[x]
         x = path_up(t, x, WHOLE)
-    out[t.element[k]] = acc
+    out[e] = gathered[k] + acc * open_fraction[e]
 
 
 @wp.func
@@ -145,33 +148,41 @@ def sent(nf: Detail, t: Nodes, s: Surfels, radiance: wp.array(dtype=wp.vec3), b:
 
 @wp.func
 def path_gather(t: Nodes, s: Surfels, ls: LinkSet, nf: Detail, radiance: wp.array(dtype=wp.vec3),
-                above: wp.array(dtype=wp.vec3), limit: float, k: int, p: wp.vec3, n: wp.vec3, size: float):
+                above: wp.array(dtype=wp.vec3), limit: float, k: int, p: wp.vec3, n: wp.vec3, size: float,
+                open_fraction: float):
     """(lighting, links evaluated) that leaf k's root path brings to point p (unit normal n, local
-    feature size ``size``): the links of nodes with at most ``limit`` leaves each at p
-    (``transfer_at``, leaf k's own as they are; near senders as p sees them,
-    ``nearfield.near_light``), those of larger nodes as they bring it to the highest such node
-    (``above``)."""
+    feature size ``size``, ``open_fraction`` of its view not inside a closed surface): the links of
+    nodes with at most ``limit`` leaves each at p (``transfer_at``, leaf k's own as they are; near
+    senders as p sees them, ``nearfield.near_light``), those of larger nodes as they bring it to
+    the highest such node (``above``); what leaf k's ancestors bring scaled by ``open_fraction``."""
+    own = wp.vec3(0.0)
     acc = wp.vec3(0.0)
     count = int(0)
     origin = lift(p, n, size)
     walk = path_link_begin(t, ls, k, limit)
     while walk.node >= 0:
-        acc += sent(nf, t, s, radiance, ls.sender[walk.link],
-                    transfer_at(t, s, ls, walk.link, p, n, int(walk.node != k), 1), p, n, origin)
+        light = sent(nf, t, s, radiance, ls.sender[walk.link],
+                     transfer_at(t, s, ls, walk.link, p, n, int(walk.node != k), 1), p, n, origin)
+        if walk.node == k:
+            own += light
+        else:
+            acc += light
         count += 1
         walk = path_link_next(t, ls, walk)
     acc += above[path_top(t, k, limit)]  # 0 at the root
-    return acc, count
+    return own + acc * open_fraction, count
 
 
 @wp.kernel
 def _leaf_gather_kernel(offset: int, t: Nodes, s: Surfels, ls: LinkSet, nf: Detail,
                         radiance: wp.array(dtype=wp.vec3), above: wp.array(dtype=wp.vec3), limit: float,
-                        out: wp.array(dtype=wp.vec3), evaluations: wp.array(dtype=wp.int32)):
+                        open_fraction: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.vec3),
+                        evaluations: wp.array(dtype=wp.int32)):
     """Leaf k's element: ``path_gather`` at its own point and normal."""
     k = wp.tid() + offset
     e = t.element[k]
-    light, count = path_gather(t, s, ls, nf, radiance, above, limit, k, s.pos[e], s.nrm[e], wp.sqrt(s.area[e]))
+    light, count = path_gather(t, s, ls, nf, radiance, above, limit, k, s.pos[e], s.nrm[e], wp.sqrt(s.area[e]),
+                               open_fraction[e])
     out[e] = light
     evaluations[k] = count
 
@@ -195,7 +206,8 @@ class Iteration:
         node_means(tree, self.exitance, self.radiance)
         device_mod.launch(_gather_kernel, tree.count,
                           [self.links.set, self.radiance, self.gathered], dev)
-        device_mod.launch(_push_kernel, int(tree.level_offsets[1]), [tree.nodes, self.gathered, out], dev)
+        device_mod.launch(_push_kernel, int(tree.level_offsets[1]),
+                          [tree.nodes, self.gathered, p.open_fraction, out], dev)
 
     def at_leaves(self, direct: wp.array, indirect: wp.array, out: wp.array) -> int:
         """out ← the same step with each link evaluated at every leaf below its receiver
@@ -224,7 +236,7 @@ def _leaf_gather(problem, links, detail: Detail, exitance: wp.array, radiance: w
     evaluations = wp.empty(n, dtype=wp.int32, device=dev.name)
     device_mod.launch(_leaf_gather_kernel, n,
                       [tree.nodes, problem.surfels, links.set, detail, radiance, _above(problem, links, radiance),
-                       float(LEAF_LIMIT), out, evaluations], dev)
+                       float(LEAF_LIMIT), problem.open_fraction, out, evaluations], dev)
     return int(evaluations.numpy().astype(np.int64).sum())
 
 
