@@ -1,7 +1,7 @@
 """Accuracy and speed of every method against Cycles, in one run (issues #3 and #5).
 
     .venv/bin/python bench/accuracy.py [--scenes cornell_box lamp_scene flat_furnace emissive_room
-                                                  furnished_room open_scene]
+                                                  furnished_room open_scene level]
                                        [--methods direct reference bunnell]
                                        [--samples 16 64 256 1024] [--reference-samples 4096]
                                        [--no-ao] [--device auto|cpu|cuda]
@@ -10,7 +10,8 @@
 
 For each scene — the sample scenes, and built in code (``bench/emissive_scenes.py``) a closed
 flat-shaded emissive furnace and a room lit by a 2 304-triangle emissive sign, and
-(``bench/real_scenes.py``) a furnished room of 8 940 vertices and an open scene lit by the sun —
+(``bench/real_scenes.py``) a furnished room of 8 940 vertices, an open scene lit by the sun and
+the benchmark level at 116 k elements —
 two quantities, each against Cycles bakes of the same vertices at each
 sample count and at a high sample count taken as the truth:
 
