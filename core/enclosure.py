@@ -11,6 +11,12 @@ gave 1.5, half of Suzanne's squared error and 28 % of the scene's).
 ``open_fraction`` traces RAYS cosine-distributed rays from each element and counts those whose
 first hit is not a back face; the hierarchical solver scales the light an element gets over its
 ancestors' links (whose rays left from other leaves) by it. Its own links' rays left from it.
+
+``enclosed_lamps`` finds the point and spot lamps inside a closed surface (a bulb inside an opaque
+emissive globe): every ray from them hits a back face, so their light cannot leave it, in Cycles
+either. A shadow ray would still reach them from a receiver touching that surface, whose lifted
+origin lies inside it (in the level of ``bench/real_scenes.py`` the tops of the lamp posts, inside
+the globes, got 10× Cycles' light and held 96 % of the scene's squared error).
 """
 from __future__ import annotations
 
@@ -22,6 +28,7 @@ import warp as wp
 from . import device as device_mod
 from .formfactor import tangent_frame
 from .rays import lift
+from .scene import LAMP_POINT, LAMP_SPOT, Lamps
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
@@ -30,6 +37,10 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 RAYS = 16
 # The R2 sequence's generator (the plastic number), for stratified directions per element.
 PLASTIC = 1.32471795724474602596
+# Rays per lamp, spread evenly over the sphere: one that escapes makes the lamp count as open.
+LAMP_RAYS = 64
+# The golden angle (rad), which spreads LAMP_RAYS directions evenly (a Fibonacci sphere).
+GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
 
 @wp.kernel
@@ -69,3 +80,35 @@ def open_fraction(problem) -> np.ndarray:
                                         int(problem.settings.seed) + 15485863, out], dev)
     problem.counts["rays"] += n * RAYS
     return out.numpy()
+
+
+@wp.kernel
+def _lamp_kernel(mesh: wp.uint64, pos: wp.array(dtype=wp.vec3), rays: int, far: float,
+                 out: wp.array(dtype=wp.int32)):
+    """Lamp l: 1 when every one of ``rays`` directions over the sphere from its position first hits
+    a back face within ``far`` (m), else 0."""
+    l = wp.tid()
+    inside = int(1)
+    for k in range(rays):
+        z = 1.0 - (2.0 * float(k) + 1.0) / float(rays)
+        r = wp.sqrt(wp.max(1.0 - z * z, 0.0))
+        phi = GOLDEN_ANGLE * float(k)
+        d = wp.vec3(r * wp.cos(phi), r * wp.sin(phi), z)
+        q = wp.mesh_query_ray(mesh, pos[l], d, far)
+        if not q.result or wp.dot(q.normal, d) < 0.0:
+            inside = 0
+    out[l] = inside
+
+
+def enclosed_lamps(lamps: Lamps, mesh: wp.Mesh, far: float, device: str) -> np.ndarray:
+    """bool[L]: the point and spot lamps of ``lamps`` whose every ray (LAMP_RAYS, over the sphere)
+    first hits a back face of ``mesh`` within ``far`` (m): inside a closed surface."""
+    out = np.zeros(len(lamps), bool)
+    point = np.flatnonzero(np.isin(lamps.kind, (LAMP_POINT, LAMP_SPOT)))
+    if len(point):
+        hit = wp.zeros(len(point), dtype=wp.int32, device=device)
+        pos = wp.array(np.ascontiguousarray(lamps.position[point], np.float32), dtype=wp.vec3, device=device)
+        wp.launch(_lamp_kernel, dim=len(point), inputs=[mesh.id, pos, LAMP_RAYS, float(far), hit],
+                  device=device)
+        out[point] = hit.numpy() > 0
+    return out

@@ -58,9 +58,10 @@ class Problem:
         self.elements = els = st.run("elements", elements_mod.build, scene, self.shading)
         d = self.device.name
         self.mesh = st.run("bvh", _mesh, scene, d)
-        self.lights = st.run("bvh", direct_mod.Lights, scene, self.device)
         extent = float(np.linalg.norm(scene.positions.max(axis=0) - scene.positions.min(axis=0))) or 1.0
         self.far = extent * 1e3 + 1e3
+        self.scene = scene = _escaping(scene, self.mesh, self.far, d, st)
+        self.lights = st.run("bvh", direct_mod.Lights, scene, self.device)
         self.surfels = surfels_mod.upload(els, self.mesh, d)
         # The solution of the previous frame of an animation (``pipeline.Sequence``), which
         # iterating solvers start from; None for a first or single frame.
@@ -106,6 +107,7 @@ class Problem:
         self.elements = els = elements_mod.build(scene, self.shading)
         self.mesh.points.assign(positions)
         self.mesh.refit()
+        self.scene = scene = _escaping(scene, self.mesh, self.far, self.device.name, self.stages)
         self.lights = direct_mod.Lights(scene, self.device)
         surfels_mod.assign(self.surfels, els)
         self.__dict__.pop("direct", None)
@@ -183,6 +185,22 @@ def _reflecting(scene: SceneData, stages: Stages) -> SceneData:
                     "reflect more light than it receives (Cycles clamps a Principled Base Color "
                     "the same way)")
     return scene
+
+
+def _escaping(scene: SceneData, mesh: wp.Mesh, far: float, device: str, stages: Stages) -> SceneData:
+    """``scene`` without its lamps inside a closed surface (``enclosure.enclosed_lamps``), warning
+    with their names."""
+    from . import enclosure
+
+    inside = stages.run("bvh", enclosure.enclosed_lamps, scene.lamps, mesh, far, device)
+    if not inside.any():
+        return scene
+    names = [scene.lamps.names[i] if i < len(scene.lamps.names) else f"lamp {i}" for i in np.flatnonzero(inside)]
+    one = len(names) == 1
+    stages.warn(f"{', '.join(names)} {'is' if one else 'are'} inside a closed surface, whose inside "
+                f"sends and passes no light: left out, as {'it has' if one else 'they have'} no "
+                "effect in Cycles either (to light that surface from inside, flip its normals)")
+    return replace(scene, lamps=scene.lamps.take(~inside))
 
 
 def _mesh(scene: SceneData, device: str) -> wp.Mesh:

@@ -46,6 +46,10 @@ class Lamps:
     spot_blend: np.ndarray
     names: list = field(default_factory=list)
 
+    # the per-lamp arrays, in field order
+    ARRAYS = ("kind", "position", "direction", "axis_u", "axis_v", "size", "shape", "power", "spot_size",
+              "spot_blend")
+
     @staticmethod
     def empty() -> "Lamps":
         z3 = np.zeros((0, 3), np.float32)
@@ -58,10 +62,15 @@ class Lamps:
         if not items:
             return Lamps.empty()
         out = {}
-        for name in ("kind", "position", "direction", "axis_u", "axis_v", "size", "shape", "power",
-                     "spot_size", "spot_blend"):
+        for name in Lamps.ARRAYS:
             out[name] = np.concatenate([getattr(x, name) for x in items])
         return Lamps(**out, names=[n for x in items for n in x.names])
+
+    def take(self, keep: np.ndarray) -> "Lamps":
+        """The lamps where bool[L] ``keep`` is true, in order."""
+        keep = np.asarray(keep, bool)
+        out = {name: getattr(self, name)[keep] for name in Lamps.ARRAYS}
+        return Lamps(**out, names=[n for n, k in zip(self.names, keep) if k])
 
     def __len__(self) -> int:
         return int(self.kind.shape[0])

@@ -1,11 +1,12 @@
 """Elements buried inside a closed surface (issue 21): they see only its inner side, which sends
-nothing, so they get no light, whatever their clusters' links carry."""
+nothing, so they get no light, whatever their clusters' links carry. Lamps inside a closed
+surface light nothing, even where a surface touches it."""
 import numpy as np
 
 import shapes
 from radiosity_baker.core import Settings, bake
 from radiosity_baker.core.problem import Problem
-from radiosity_baker.core.scene import LAMP_POINT
+from radiosity_baker.core.scene import LAMP_POINT, Lamps
 
 CUBE_CENTRE = (0.3, 0.2, -1.0)  # on the room's floor, half of it sunk below
 CUBE_SIZE = 0.5
@@ -56,3 +57,34 @@ def test_elements_inside_a_closed_surface_get_no_light_over_cluster_links():
     assert lit > 0.0
     assert coarse.indirect[buried].mean() < 0.1 * lit
     np.testing.assert_allclose(lit, reference.indirect[clear].mean(), rtol=0.05)
+
+
+def _rotation(a, b) -> np.ndarray:
+    """float[3,3]: the rotation turning direction a into direction b (not opposite)."""
+    a, b = np.asarray(a, float) / np.linalg.norm(a), np.asarray(b, float) / np.linalg.norm(b)
+    v = np.cross(a, b)
+    k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + k + k @ k / (1 + a @ b)
+
+
+def test_a_lamp_inside_a_closed_surface_lights_nothing_even_where_it_touches():
+    """A cube standing on one corner on the room's floor holds a point lamp: the floor element
+    under that corner lifts its shadow rays' origin into the cube, so they reached the lamp (it
+    got 5.4 where the floor round it gets 1.1, measured). The lamp is left out with a warning:
+    that element is dark, and the room lit exactly as by the other lamp alone."""
+    corner = np.array([0.25, 0.25, -1.0])  # a floor vertex
+    centre = corner + (0.0, 0.0, CUBE_SIZE * np.sqrt(3) / 2)
+    turn = _rotation((-1, -1, -1), (0, 0, -1))
+    parts = [(*p, (0.7,) * 3, (0,) * 3) for p in shapes.box(2.0, 8, inward=True)]
+    parts += [((p @ turn.T + centre).astype(np.float32), (n @ turn.T).astype(np.float32), t, (0.5,) * 3,
+               (0,) * 3) for p, n, t in shapes.box(CUBE_SIZE, 4)]
+    outside = shapes.lamp(LAMP_POINT, position=(-0.3, -0.2, 0.6), power=(40.0,) * 3)
+    inside = shapes.lamp(LAMP_POINT, position=tuple(centre), power=(40.0,) * 3)
+    both = Problem(shapes.scene(parts, Lamps.concat([outside, inside])), Settings(device="cpu"))
+    alone = Problem(shapes.scene(parts, outside), Settings(device="cpu"))
+    assert len(both.scene.lamps) == 1
+    assert any(w.startswith("Lamp is inside a closed surface") for w in both.stages.warnings)
+    touching = np.linalg.norm(both.elements.position + both.scene.origin - corner, axis=1) < 1e-4
+    assert touching.sum() == 1
+    np.testing.assert_array_equal(both.direct[touching], 0.0)
+    np.testing.assert_array_equal(both.direct, alone.direct)
