@@ -312,3 +312,27 @@ def test_a_closed_emitter_furnace_reaches_the_analytic_radiosity(method, shape, 
         np.testing.assert_allclose(result.output, 2.0, rtol=0.01)
     error = result.output / 2.0 - 1.0
     assert np.sqrt((error ** 2).mean()) < 0.01 and abs(error.mean()) < 0.01
+
+
+def test_receivers_the_light_tree_samples_poorly_are_estimated_again_weighing_every_emitter(monkeypatch):
+    """A floor 1 mm under an emissive sphere (320 triangles, radiance 1) and under a 4 m panel of
+    radiance 10 at 3 m, with the light tree choosing emitters (as on large scenes): its bounds
+    under-rate the sphere's triangles right over a receiver. Floor elements within 0.35 m of the
+    contact against 1 024 exactly weighed samples: the tree alone 24.8 % relative RMSE, with the
+    noisiest receivers (standard error > EXACT_NOISE) estimated again exactly 12.2 %, every
+    receiver exactly 5.2 % (measured). Bound 16 %."""
+    p, n, t = shapes.grid(1.0, 16)
+    q, m, u = shapes.icosphere(0.3, 2, inward=False)
+    a, b, c = shapes.grid(4.0, 2, z=3.0, flip=True)
+    scene = shapes.scene([(p, n, t, (0.5,) * 3, (0,) * 3),
+                          (q + np.float32([0, 0, 0.301]), m, u, (0.0,) * 3, (1.0,) * 3),
+                          (a, b, c, (0.0,) * 3, (10.0,) * 3)])
+    near = np.linalg.norm(p[:, :2], axis=1) < 0.35
+    truth = bake(scene, Settings(method="direct", light_selection="exact",
+                                 light_samples=1024)).lighting[:len(p), 0]
+    monkeypatch.setattr(direct, "EXACT_WORK", 0)  # auto: the tree, as on a scene of many receivers
+
+    def error(selection):
+        lit = bake(scene, Settings(method="direct", light_selection=selection)).lighting[:len(p), 0]
+        return np.sqrt(np.mean((lit - truth)[near] ** 2)) / truth[near].mean()
+    assert error("auto") < 0.16 < error("tree")
