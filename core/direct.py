@@ -912,6 +912,9 @@ def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.
 # The back of a surface without thickness counts as lit where its direct light reaches this
 # fraction of the brightest direct lighting of any element.
 BACK_LIGHT = 0.01
+# Light samples per element of that check (at most ``light_samples``): it only tells lit backs from
+# dark ones, against a threshold far below the light of a lit one.
+BACK_SAMPLES = 16
 
 
 def lit_backs(problem) -> tuple[list, int]:
@@ -919,7 +922,7 @@ def lit_backs(problem) -> tuple[list, int]:
     direct light reaches — at some element at least BACK_LIGHT of the brightest direct lighting
     of the elements —, shadow rays traced). Elements are one-sided: that light is not passed on,
     where Cycles reflects it off the back face. An unshadowed pass picks the candidates, a
-    shadowed one (``settings.light_samples``) confirms them."""
+    shadowed one (BACK_SAMPLES samples) confirms them."""
     from . import elements as elements_mod
 
     scene, els, settings = problem.scene, problem.elements, problem.settings
@@ -931,7 +934,7 @@ def lit_backs(problem) -> tuple[list, int]:
     points, backs, sizes = els.position[at], -els.normal[at], problem.element_sizes[at]
     for mode in (MODE_UNSHADOWED, MODE_FULL):
         light, rays, _, _ = estimate(problem, points, backs, sizes, np.full(len(at), mode, np.int32),
-                                     settings.light_samples, settings.seed)
+                                     min(settings.light_samples, BACK_SAMPLES), settings.seed)
         lit = light.max(axis=1) >= threshold
         at, points, backs, sizes = at[lit], points[lit], backs[lit], sizes[lit]
         if not len(at):
