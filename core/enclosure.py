@@ -107,7 +107,8 @@ def enclosed_lamps(lamps: Lamps, mesh: wp.Mesh, far: float, device: str) -> np.n
     point = np.flatnonzero(np.isin(lamps.kind, (LAMP_POINT, LAMP_SPOT)))
     if len(point):
         hit = wp.zeros(len(point), dtype=wp.int32, device=device)
-        pos = wp.array(np.ascontiguousarray(lamps.position[point], np.float32), dtype=wp.vec3, device=device)
+        pos = wp.array(np.ascontiguousarray(lamps.position[point], np.float32), dtype=wp.vec3,
+                       device=device)
         wp.launch(_lamp_kernel, dim=len(point), inputs=[mesh.id, pos, LAMP_RAYS, float(far), hit],
                   device=device)
         out[point] = hit.numpy() > 0

@@ -195,7 +195,8 @@ def _escaping(scene: SceneData, mesh: wp.Mesh, far: float, device: str, stages: 
     inside = stages.run("bvh", enclosure.enclosed_lamps, scene.lamps, mesh, far, device)
     if not inside.any():
         return scene
-    names = [scene.lamps.names[i] if i < len(scene.lamps.names) else f"lamp {i}" for i in np.flatnonzero(inside)]
+    names = [scene.lamps.names[i] if i < len(scene.lamps.names) else f"lamp {i}"
+             for i in np.flatnonzero(inside)]
     one = len(names) == 1
     stages.warn(f"{', '.join(names)} {'is' if one else 'are'} inside a closed surface, whose inside "
                 f"sends and passes no light: left out, as {'it has' if one else 'they have'} no "
