@@ -899,7 +899,7 @@ def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.
     out, rays, _, noise = estimate(problem, points, normals, sizes, np.full(n, MODE_FULL, np.int32),
                                    count, seed, progress=progress, **seeding)
     noisy = noise > EXACT_NOISE
-    if (noisy.any() and problem.settings.light_selection == "auto"
+    if (problem.settings.light_selection == "auto" and noisy.any()
             and not exact_selection(problem, seeding.get("whole", n))):
         again, more, _, _ = estimate(problem, points, normals, sizes,
                                      np.where(noisy, MODE_FULL, MODE_SKIP).astype(np.int32), count,

@@ -26,6 +26,7 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
+from .directions import cone_sample_of
 from .formfactor import tangent_frame
 from .rays import lift
 from .scene import LAMP_POINT, LAMP_SPOT, Lamps
@@ -39,8 +40,6 @@ RAYS = 16
 PLASTIC = 1.32471795724474602596
 # Rays per lamp, spread evenly over the sphere: one that escapes makes the lamp count as open.
 LAMP_RAYS = 64
-# The golden angle (rad), which spreads LAMP_RAYS directions evenly (a Fibonacci sphere).
-GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
 
 @wp.kernel
@@ -90,13 +89,11 @@ def _lamp_kernel(mesh: wp.uint64, pos: wp.array(dtype=wp.vec3), rays: int, far: 
     l = wp.tid()
     inside = int(1)
     for k in range(rays):
-        z = 1.0 - (2.0 * float(k) + 1.0) / float(rays)
-        r = wp.sqrt(wp.max(1.0 - z * z, 0.0))
-        phi = GOLDEN_ANGLE * float(k)
-        d = wp.vec3(r * wp.cos(phi), r * wp.sin(phi), z)
+        d = cone_sample_of(k, rays, wp.vec3(0.0, 0.0, 1.0), -1.0, 0.0)  # the whole sphere
         q = wp.mesh_query_ray(mesh, pos[l], d, far)
         if not q.result or wp.dot(q.normal, d) < 0.0:
             inside = 0
+            break
     out[l] = inside
 
 
