@@ -890,23 +890,34 @@ def direct_lighting(problem, points: np.ndarray, normals: np.ndarray, sizes: np.
     points, normals: float32[N,3] positions (m, the problem's frame) and unit normals; sizes:
     float32[N] local feature size (m) for the ray offset; part: where they lie in a larger set
     (``receivers.Part``), None for a whole set. Where the light tree chose the emitters, the
-    noisiest receivers are estimated again weighing every emitter exactly (EXACT_NOISE). Returns
-    (float32[N,3] lighting = irradiance/π, number of shadow rays traced).
+    noisiest receivers are estimated again weighing every emitter exactly (``exact_again``).
+    Returns (float32[N,3] lighting = irradiance/π, number of shadow rays traced).
     """
     n = int(points.shape[0])
     seeding = part.seeding() if part is not None else {}
     count, seed = problem.settings.light_samples, problem.settings.seed
-    out, rays, _, noise = estimate(problem, points, normals, sizes, np.full(n, MODE_FULL, np.int32),
-                                   count, seed, progress=progress, **seeding)
-    noisy = noise > EXACT_NOISE
-    if (problem.settings.light_selection == "auto" and noisy.any()
-            and not exact_selection(problem, seeding.get("whole", n))):
-        again, more, _, _ = estimate(problem, points, normals, sizes,
-                                     np.where(noisy, MODE_FULL, MODE_SKIP).astype(np.int32), count,
-                                     seed + 1, exact=True, **seeding)
-        out[noisy] = again[noisy]
-        rays = rays + more
-    return out, int(rays.sum())
+    mode = np.full(n, MODE_FULL, np.int32)
+    out, rays, _, noise = estimate(problem, points, normals, sizes, mode, count, seed, progress=progress, **seeding)
+    noisy, again, more = exact_again(problem, points, normals, sizes, mode, noise, count, seed + 1, seeding)
+    out[noisy] = again[noisy]
+    return out, int(rays.sum() + more.sum())
+
+
+def exact_again(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray, mode: np.ndarray,
+                noise: np.ndarray, count: int, seed: int, seeding: dict):
+    """Where ``light_selection`` auto let the light tree choose the emitters: the receivers whose
+    estimate (``mode`` int32[N], its ``noise`` float32[N] from ``estimate``) has a relative standard
+    error above EXACT_NOISE, estimated again in the same mode with ``count`` samples weighing every
+    emitter exactly. Returns (bool[N] those receivers, float32[N,3] their lighting, int64[N] rays);
+    none under exact or tree selection, or where auto weighs exactly already."""
+    n = int(mode.shape[0])
+    noisy = (noise > EXACT_NOISE) & (mode != MODE_SKIP)
+    if (problem.settings.light_selection != "auto" or not noisy.any()
+            or exact_selection(problem, seeding.get("whole", n))):
+        return np.zeros(n, bool), np.zeros((n, 3), np.float32), np.zeros(n, np.int64)
+    again, rays, _, _ = estimate(problem, points, normals, sizes, np.where(noisy, mode, MODE_SKIP).astype(np.int32),
+                                 count, seed, exact=True, **seeding)
+    return noisy, again, rays
 
 
 # The back of a surface without thickness counts as lit where its direct light reaches this

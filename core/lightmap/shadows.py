@@ -11,6 +11,9 @@ The schedule works on each page's (supersampled) texel grid:
 3. Texels whose estimate is noisy (its standard error, from the spread of its samples, above
    NOISE of it: a penumbra, lights both seen and hidden) and the texels next to them trace up to
    ``shadow_budget`` rays in all, both estimates averaged by their sample counts.
+4. Where the light tree chose the emitters (``light_selection`` auto on many emitters), texels
+   whose first estimate is very noisy (``direct.exact_again``: beside an emitter the tree's bounds
+   under-rate) are estimated again weighing every emitter exactly, their extra samples too.
 
 What it can miss: a shadow too faint for a whole neighbourhood of probes (3 × 3 tiles, 144 rays)
 to see, covering a fraction f of the light everywhere there, with probability about (1 − f)^144.
@@ -102,6 +105,11 @@ def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, 
     samples = settings.light_samples
     out, rays, flags, noise = direct.estimate(problem, points, normals, sizes, mode, samples, settings.seed,
                                        progress=lambda f: report(0.2 + 0.5 * f), **seeding)
+    # texels the light tree sampled poorly (beside an emitter), weighing every emitter exactly
+    exact, again, exact_rays = direct.exact_again(problem, points, normals, sizes, mode, noise, samples,
+                                                  settings.seed + 2, seeding)
+    out[exact] = again[exact]
+    rays = rays + exact_rays
     more = settings.shadow_budget - samples
     penumbra = np.zeros(n, bool)
     for texels, _, _, rows in grids:
@@ -111,11 +119,14 @@ def texel_direct(problem, pages: list, points: np.ndarray, normals: np.ndarray, 
         for near in _around(grid.reshape(texels.height, texels.width)):
             grown |= near
         penumbra[rows] = grown.ravel()[texels.index] & (mode[rows] == direct.MODE_FULL)
-    if more > 0 and penumbra.any():
+    # penumbra texels get more samples, chosen as their first ones were
+    for these, weighed in ((penumbra & ~exact, None), (penumbra & exact, True)):
+        if more <= 0 or not these.any():
+            continue
         extra, extra_rays, _, _ = direct.estimate(problem, points, normals, sizes,
-                                               np.where(penumbra, direct.MODE_FULL, direct.MODE_SKIP),
+                                               np.where(these, direct.MODE_FULL, direct.MODE_SKIP),
                                                more, settings.seed + 1,
-                                               progress=lambda f: report(0.7 + 0.3 * f), **seeding)
-        out[penumbra] = (samples * out[penumbra] + more * extra[penumbra]) / (samples + more)
+                                               progress=lambda f: report(0.7 + 0.3 * f), exact=weighed, **seeding)
+        out[these] = (samples * out[these] + more * extra[these]) / (samples + more)
         rays = rays + extra_rays
     return out, int(probe_rays.sum() + rays.sum())

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import shapes
-from radiosity_baker.core import Settings, bake
+from radiosity_baker.core import Settings, bake, direct
 from radiosity_baker.core.lightmap import LightmapRequest, LightmapObject
 from radiosity_baker.core.scene import LAMP_AREA, LAMP_POINT
 
@@ -57,3 +57,32 @@ def test_adaptive_shadows_match_many_rays_everywhere_with_far_fewer(tmp_path, la
     assert lit.mean() > 0.5
     off = np.abs(adaptive.rgb[cov][lit] / open_sky.rgb[cov][lit] - 1.0).max(axis=1)
     assert (off <= 1e-5).mean() > 0.999 and off.max() < 0.01
+
+
+def test_texels_the_light_tree_samples_poorly_are_estimated_again_weighing_every_emitter(tmp_path, monkeypatch):
+    """A 0.7 m floor (the lightmapped part) 1 mm under an emissive sphere of radius 0.3 m (320
+    triangles, radiance 1) and under a 4 m panel of radiance 10 at 3 m, the light tree choosing the
+    emitters (as on large scenes): its bounds under-rate the sphere's triangles right over a texel.
+    Texels' relative RMSE against 1 024 exactly weighed samples each (measured): the tree alone
+    6.1 %, with the noisiest texels estimated again exactly 3.7 % (every texel exactly: 1.7 %).
+    Bound 5 %."""
+    fp, fn, ft = shapes.grid(0.7, 8)
+    q, m, u = shapes.icosphere(0.3, 2, inward=False)
+    a, b, c = shapes.grid(4.0, 2, z=3.0, flip=True)
+    sc = shapes.scene([(fp, fn, ft, (0.5,) * 3, (0,) * 3),
+                       (q + np.float32([0, 0, 0.301]), m, u, (0.0,) * 3, (1.0,) * 3),
+                       (a, b, c, (0.0,) * 3, (10.0,) * 3)])
+    nt = ft.shape[0]
+    target = LightmapObject("floor", "floor", corner_vert=ft.ravel().astype(np.int32),
+                            corner_triangles=np.arange(3 * nt, dtype=np.int32).reshape(nt, 3),
+                            triangle_offset=0)
+    truth, _ = _bake(sc, target, tmp_path, light_selection="exact", texel_shadows="fixed", light_samples=1024)
+    monkeypatch.setattr(direct, "EXACT_WORK", 0)  # auto: the tree, as on a scene of many receivers
+    cov = truth.covered
+
+    def error(selection):
+        page, _ = _bake(sc, target, tmp_path, light_selection=selection)
+        return float(np.sqrt(((page.rgb[cov] - truth.rgb[cov]) ** 2).mean()) / truth.rgb[cov].mean())
+    auto, tree = error("auto"), error("tree")
+    print(f"\ntexels against 1024 exact samples: auto {auto:.4f}, tree {tree:.4f}")
+    assert auto < 0.05 < tree
