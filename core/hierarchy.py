@@ -39,6 +39,9 @@ class Nodes:
     position: vec3[m] (m); normal: vec3[m] unit area-weighted mean normal; spread: float32[m] length
     of the area-weighted mean of the unit normals (1 for a leaf); area: float32[m] (m²); radius:
     float32[m] (m) bounding radius of the subtree's disks around ``position`` (a leaf: √(area/π));
+    reach: float32[m] (m) bounding radius of the subtree's surface around ``position`` (a leaf: of
+    its share of its triangles, the third around its vertex, which reaches past its disk where
+    its vertex is hidden under an object and the rest lies in view);
     leaves: float32[m] number of disks in the subtree; first_child: int32[m] (−1 for a leaf; the
     children are first_child … child_end − 1); child_end: int32[m] one past the last child (−1 for
     a leaf), so kernels that split a node need no level bounds; descend:
@@ -54,6 +57,7 @@ class Nodes:
     spread: wp.array(dtype=wp.float32)
     area: wp.array(dtype=wp.float32)
     radius: wp.array(dtype=wp.float32)
+    reach: wp.array(dtype=wp.float32)
     leaves: wp.array(dtype=wp.float32)
     first_child: wp.array(dtype=wp.int32)
     child_end: wp.array(dtype=wp.int32)
@@ -105,6 +109,24 @@ def _morton_kernel(offset: int, pos: wp.array(dtype=wp.vec3), lo: wp.vec3, inv_e
     values[i] = i
 
 
+@wp.func
+def share_reach(s: Surfels, e: int, radius: float) -> float:
+    """The farthest point of element e's share of its triangles (each triangle's third around e's
+    vertex: up to its edges' midpoints and its centroid) from e's point, at least ``radius``."""
+    p = s.pos[e]
+    v = s.points[s.vertex[e]]
+    r = radius
+    for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
+        tri = s.fan_triangles[k]
+        a = s.points[s.tris[3 * tri]]
+        b = s.points[s.tris[3 * tri + 1]]
+        c = s.points[s.tris[3 * tri + 2]]
+        r = wp.max(r, wp.length((a + b + c) / 3.0 - p))
+        r = wp.max(r, wp.max(wp.length((v + a) * 0.5 - p), wp.max(wp.length((v + b) * 0.5 - p),
+                                                                    wp.length((v + c) * 0.5 - p))))
+    return r
+
+
 @wp.kernel
 def _leaf_kernel(offset: int, order: wp.array(dtype=wp.int32), s: Surfels, t: Nodes):
     k = wp.tid() + offset
@@ -115,6 +137,7 @@ def _leaf_kernel(offset: int, order: wp.array(dtype=wp.int32), s: Surfels, t: No
     t.spread[k] = 1.0
     t.area[k] = a
     t.radius[k] = wp.sqrt(a / 3.141592653589793)
+    t.reach[k] = share_reach(s, e, t.radius[k])
     t.leaves[k] = 1.0
     t.element[k] = e
 
@@ -156,8 +179,10 @@ def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
     else:  # only zero-area disks below: they count for nothing, but keep the node in place
         centre = plain / float(c1 - c0)
     r = float(0.0)
+    reach = float(0.0)
     for c in range(c0, c1):
         r = wp.max(r, wp.length(n_pos[c] - centre) + n_radius[c])
+        reach = wp.max(reach, wp.length(n_pos[c] - centre) + t.reach[c])
     s = wp.length(mean_n)
     n_pos[node] = centre
     n_spread[node] = s
@@ -167,6 +192,7 @@ def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
         n_nrm[node] = wp.vec3(0.0, 0.0, 1.0)
     n_area[node] = total
     n_radius[node] = r
+    t.reach[node] = reach
     n_leaves[node] = count
 
 
@@ -269,7 +295,7 @@ def build(problem) -> Tree:
 
     t = Nodes()
     t.position, t.normal = (wp.empty(m, dtype=wp.vec3, device=d) for _ in range(2))
-    t.spread, t.area, t.radius, t.leaves = (wp.empty(m, dtype=wp.float32, device=d) for _ in range(4))
+    t.spread, t.area, t.radius, t.reach, t.leaves = (wp.empty(m, dtype=wp.float32, device=d) for _ in range(5))
     t.first_child, t.child_end, t.descend, t.parent, t.next, t.element = (
         wp.full(m, -1, dtype=wp.int32, device=d) for _ in range(6))
     t.level = wp.zeros(m, dtype=wp.int32, device=d)

@@ -60,7 +60,7 @@ from .errors import BakeError
 from .formfactor import cluster_ff, disk_ff
 from .hierarchy import Nodes
 from .rays import lift, visible
-from .surfels import Surfels, face_ff, fan_sample, pair_hits
+from .surfels import Surfels, face_ff, fan_sample, pair_hits, ray_ends
 
 DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
 # Peak bytes per link (both directions): the pair and its five values while it is made, then two
@@ -191,15 +191,34 @@ def cos_bound(n: wp.vec3, cone: wp.vec2, u: wp.vec3, beta: wp.vec2) -> float:
 
 
 @wp.func
+def facing(na: wp.vec3, cone_a: wp.vec2, nb: wp.vec3, cone_b: wp.vec2, u: wp.vec3, spread: float,
+           sides: int) -> wp.vec2:
+    """(bound of a's cosine, of b's) over their normal cones and the directions from a to b within
+    asin(``spread``) of unit u (``cos_bound``), either face with ``sides`` 2."""
+    sb = wp.min(spread, 1.0)
+    beta = wp.vec2(wp.sqrt(1.0 - sb * sb), sb)
+    ca = cos_bound(na, cone_a, u, beta)
+    cb = cos_bound(nb, cone_b, -u, beta)
+    if sides == 2:
+        ca = wp.max(ca, cos_bound(-na, cone_a, u, beta))
+        cb = wp.max(cb, cos_bound(-nb, cone_b, -u, beta))
+    return wp.vec2(ca, cb)
+
+
+@wp.func
 def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec2, pb: wp.vec3,
-              nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec2, sides: int) -> wp.vec3:
-    """How much nodes a and b — centres p, unit normals n, bounding radii r (m), areas (m²),
-    normal cones ((cos, sin) of the half-angle) — must be refined to exchange light as wholes:
-    (need of a, need of b, 1 if they can exchange light at all else 0).
+              nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec2, reach: float, sides: int) -> wp.vec3:
+    """How much nodes a and b — centres p, unit normals n, bounding radii r (m) of their disks,
+    areas (m²), normal cones ((cos, sin) of the half-angle), the sum of the bounding radii of their
+    surfaces (``Nodes.reach``, m) — must be refined to exchange light as wholes: (need of a, need
+    of b, 1 if they can exchange light at all else 0).
 
     Dropped (0) when the cosines bounded over the cones and the directions between the bounding
-    spheres show one side facing away; 1 each when the spheres overlap. Else the need of a is the
-    larger of its size as b sees it, A_a·cos·cos / (π d² + A_a) with the bounded cosines and the
+    spheres show one side facing away, those of the surfaces as well as the disks (the disks'
+    alone drop a floor vertex hidden under a box whose triangles reach out in front of it); 1 each
+    when the disks' spheres overlap. Else the need of a is the larger of its size as b sees it,
+    A_a·cos·cos / (π d² + A_a) with the bounded cosines (the disks', or the surfaces' where the
+    disks face away) and the
     centres' distance d, and its normal spread as a receiver: b's form factor from a without a's
     cosine times 2 sin(cone_a / 2) — how far a's leaves' normals may differ from its own — times
     CONE_WEIGHT. A point
@@ -211,17 +230,14 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     if gap <= 0.0:
         return wp.vec3(1.0, 1.0, 1.0)
     u = v / d
-    sb = (ra + rb) / d
-    beta = wp.vec2(wp.sqrt(1.0 - sb * sb), sb)
-    ca = cos_bound(na, cone_a, u, beta)
-    cb = cos_bound(nb, cone_b, -u, beta)
-    if sides == 2:
-        ca = wp.max(ca, cos_bound(-na, cone_a, u, beta))
-        cb = wp.max(cb, cos_bound(-nb, cone_b, -u, beta))
-        if ca <= 0.0 or cb <= 0.0:
+    cosines = facing(na, cone_a, nb, cone_b, u, (ra + rb) / d, sides)
+    if cosines[0] <= 0.0 or cosines[1] <= 0.0:
+        # the disks face away; the surfaces around them may not
+        cosines = facing(na, cone_a, nb, cone_b, u, reach / d, sides)
+        if cosines[0] <= 0.0 or cosines[1] <= 0.0:
             return wp.vec3(0.0, 0.0, 0.0)
-    elif ca <= 0.0 or cb <= 0.0:
-        return wp.vec3(0.0, 0.0, 0.0)
+    ca = cosines[0]
+    cb = cosines[1]
     g2 = PI * d * d
     g_ab = area_b * cb / (g2 + area_b)  # b seen from a, without a's cosine
     g_ba = area_a * ca / (g2 + area_a)
@@ -331,14 +347,14 @@ def leaf_point(t: Nodes, s: Surfels, leaf: int) -> wp.vec3:
 
 
 @wp.func
-def element_ray(s: Surfels, i: int, j: int, u0: float, u1: float, u2: float) -> float:
-    """1 if one of the reference's visibility rays between elements i and j is free (``pair_hits``:
-    from the lower-numbered one's point to a point of the other's own surface, both lifted off
-    their surfaces), else 0."""
-    lo = wp.min(i, j)
-    hi = wp.max(i, j)
-    origin = lift(s.pos[lo], s.nrm[lo], wp.sqrt(s.area[lo]))
-    return visible(s.mesh, origin, lift(fan_sample(s, hi, u0, u1, u2), s.nrm[hi], wp.sqrt(s.area[hi])))
+def element_ray(s: Surfels, ends: wp.vec2i, u0: float, u1: float, u2: float) -> float:
+    """1 if one of the reference's visibility rays between two elements is free (``pair_hits``:
+    from element ends[0]'s point to a point of element ends[1]'s own surface, both lifted off
+    their surfaces; ``surfels.ray_ends``), else 0."""
+    i = ends[0]
+    j = ends[1]
+    origin = lift(s.pos[i], s.nrm[i], wp.sqrt(s.area[i]))
+    return visible(s.mesh, origin, lift(fan_sample(s, j, u0, u1, u2), s.nrm[j], wp.sqrt(s.area[j])))
 
 
 @wp.func
@@ -415,7 +431,7 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
             u1 = wp.randf(state)
             u2 = wp.randf(state)
             if probe or f_ab > 0.0 or f_ba > 0.0:
-                hit = element_ray(s, ea, eb, u0, u1, u2)
+                hit = element_ray(s, ray_ends(ea, eb, f_ab, f_ba), u0, u1, u2)
                 traced += 1
             else:
                 skipped += 1
@@ -460,7 +476,7 @@ def sampled_transfer(t: Nodes, s: Surfels, sm: Sampling, a: int, b: int, rays: i
             eb = t.element[pair[1]]
             if not (sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides) > 0.0
                     or sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides) > 0.0):
-                seen += element_ray(s, ea, eb, u0, u1, u2) - 1.0
+                seen += element_ray(s, ray_ends(ea, eb, 0.0, 0.0), u0, u1, u2) - 1.0
                 traced += 1
     plain = seen / float(rays)
     return out, wp.vec3(_fraction(t_ab, u_ab, plain), _fraction(t_ba, u_ba, plain), plain), traced
@@ -563,13 +579,14 @@ def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int
                     dec = LINK
                     v = float(1.0)
                     if visibility != 0 and rays > 0:
-                        v = float(pair_hits(s, ea, eb, rays, seed)) / float(rays)
+                        v = float(pair_hits(s, ray_ends(ea, eb, f_ab, f_ba), rays, seed)) / float(rays)
                         ray_count = rays
                     out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
                     seen = wp.vec3(v, v, v)
             else:
                 need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
-                                 t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b], sides)
+                                 t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b],
+                                 t.reach[a] + t.reach[b], sides)
                 if need[2] > 0.0:
                     w = float(1.0)
                     if weighted != 0:

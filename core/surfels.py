@@ -154,18 +154,34 @@ def face_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
 
 
 @wp.func
-def pair_hits(s: Surfels, i: int, j: int, rays: int, seed: int) -> int:
-    """Unblocked rays of ``rays`` from min(i,j)'s point to stratified points of the other's own
-    surface, both lifted off their surfaces. Seeded by the pair and always traced the same way
-    round, so every evaluation of a pair gives the same value."""
-    lo = wp.min(i, j)
-    hi = wp.max(i, j)
-    state = wp.rand_init(seed, lo * 65521 + hi)
-    origin = lift(s.pos[lo], s.nrm[lo], wp.sqrt(s.area[lo]))
+def ray_ends(i: int, j: int, f_ij: float, f_ji: float) -> wp.vec2i:
+    """(from, to): which element's point the visibility rays between elements i and j leave from,
+    towards the other's own surface, given the form factors f_ij (i receiving from j) and f_ji.
+    Where only one of them receives, from its point: a vertex hidden under an object standing on
+    the floor still sends light from the part of its triangles in front of that object, which its
+    own point cannot see (an object's base got 16 % too little light from the floor in front).
+    Where both do, one ray serves both ways: from the lower-numbered one's, the same either way
+    round."""
+    if f_ij > 0.0 and not (f_ji > 0.0):
+        return wp.vec2i(i, j)
+    if f_ji > 0.0 and not (f_ij > 0.0):
+        return wp.vec2i(j, i)
+    return wp.vec2i(wp.min(i, j), wp.max(i, j))
+
+
+@wp.func
+def pair_hits(s: Surfels, ends: wp.vec2i, rays: int, seed: int) -> int:
+    """Unblocked rays of ``rays`` from element ends[0]'s point to stratified points of element
+    ends[1]'s own surface (``ray_ends``), both lifted off their surfaces. Seeded by the pair, so
+    every evaluation of a pair gives the same value."""
+    i = ends[0]
+    j = ends[1]
+    state = wp.rand_init(seed, wp.min(i, j) * 65521 + wp.max(i, j))
+    origin = lift(s.pos[i], s.nrm[i], wp.sqrt(s.area[i]))
     hits = int(0)
     for k in range(rays):
         u0 = (float(k) + wp.randf(state)) / float(rays)
-        q = lift(fan_sample(s, hi, u0, wp.randf(state), wp.randf(state)), s.nrm[hi], wp.sqrt(s.area[hi]))
+        q = lift(fan_sample(s, j, u0, wp.randf(state), wp.randf(state)), s.nrm[j], wp.sqrt(s.area[j]))
         d = q - origin
         dist = wp.length(d)
         if dist <= 0.0:

@@ -23,7 +23,7 @@ from .. import device as device_mod
 from ..errors import BakeError
 from ..nearfield import Detail, empty, near_light, varies
 from ..rays import lift
-from ..surfels import Surfels, element_ff, pair_hits
+from ..surfels import Surfels, element_ff, pair_hits, ray_ends
 from .base import Solution, exitance, iterate, reconstruct_with_detail
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
@@ -59,7 +59,7 @@ def _pairs_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
                 f_ji = element_ff(s, j, i)
                 if f_ij <= 0.0 and f_ji <= 0.0:
                     continue
-                hits = pair_hits(s, i, j, rays, seed)
+                hits = pair_hits(s, ray_ends(i, j, f_ij, f_ji), rays, seed)
                 count += rays
                 if mode == MATRIX:
                     v = float(hits) / float(rays)
@@ -100,7 +100,11 @@ def _sweep_kernel(offset: int, n: int, s: Surfels, rays: int, seed: int, mode: i
                         if mode == VISIBILITY:
                             m = f * float(visibility[i, j]) / float(rays)
                         else:
-                            m = f * float(pair_hits(s, i, j, rays, seed)) / float(rays)
+                            # the other way's form factor decides the rays' ends only if i's is the lower
+                            back = float(1.0)
+                            if j < i:
+                                back = element_ff(s, j, i)
+                            m = f * float(pair_hits(s, ray_ends(i, j, f, back), rays, seed)) / float(rays)
                             count += rays
             if m > 0.0 or varies(nf, j):
                 acc += near_light(nf, s, j, wp.cw_mul(s.albedo[j], direct[j] + indirect[j]), m, p, normal, origin)

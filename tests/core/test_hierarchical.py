@@ -48,10 +48,25 @@ def open_box(albedo=(0.6,) * 3, quads=8):
                         shapes.lamp(LAMP_POINT, (0.2, 0, 1.5), power=(200,) * 3))
 
 
-def test_with_leaf_links_only_it_is_the_reference_solver():
+def box_on_a_floor():
+    """A 0.8 m box standing on an 8 m floor of 0.57 m cells under a sun: floor vertices hidden under
+    the box have triangles reaching out in front of its sides."""
+    fp, fn, ft = shapes.grid(8.0, 14)
+    parts = [(fp, fn, ft, (0.55, 0.52, 0.48), (0,) * 3)]
+    parts += [(*f, (0.45, 0.3, 0.18), (0,) * 3) for f in shapes.box(0.8, 3, (-0.5, 1.8, 0.4))]
+    d = np.array([0.5, -0.4, -0.75])
+    return shapes.scene(parts, shapes.lamp(LAMP_SUN, direction=tuple(d / np.linalg.norm(d)), power=(3.0,) * 3,
+                                           size=(0.0175, 0.0)))
+
+
+@pytest.mark.parametrize("scene", [lambda: open_box(quads=5), box_on_a_floor], ids=["open box", "box on a floor"])
+def test_with_leaf_links_only_it_is_the_reference_solver(scene):
     """At a threshold no cluster pair passes, every link joins two elements with the reference's
-    form factors and rays (the same seed): the same transport, the same solution."""
-    scene = open_box(quads=5)
+    form factors and rays (the same seed): the same transport, the same solution. On the floor
+    under a box, the pairs of the box's sides with floor vertices hidden under it were dropped as
+    facing away — bounded by the vertices' disks, not their triangles —, and 63 of the 963
+    elements got less light than the reference's (up to 66 % less, measured)."""
+    scene = scene()
     ours = bake(scene, Settings(method="hierarchical", device="cpu", link_threshold=1e-5))
     reference = bake(scene, Settings(method="reference", device="cpu"))
     n = ours.counts["elements"]
