@@ -321,12 +321,7 @@ def test_receivers_the_light_tree_samples_poorly_are_estimated_again_weighing_ev
     contact against 1 024 exactly weighed samples: the tree alone 24.8 % relative RMSE, with the
     noisiest receivers (standard error > EXACT_NOISE) estimated again exactly 12.2 %, every
     receiver exactly 5.2 % (measured). Bound 16 %."""
-    p, n, t = shapes.grid(1.0, 16)
-    q, m, u = shapes.icosphere(0.3, 2, inward=False)
-    a, b, c = shapes.grid(4.0, 2, z=3.0, flip=True)
-    scene = shapes.scene([(p, n, t, (0.5,) * 3, (0,) * 3),
-                          (q + np.float32([0, 0, 0.301]), m, u, (0.0,) * 3, (1.0,) * 3),
-                          (a, b, c, (0.0,) * 3, (10.0,) * 3)])
+    scene, p, _ = shapes.floor_under_emissive_sphere(1.0, 16)
     near = np.linalg.norm(p[:, :2], axis=1) < 0.35
     truth = bake(scene, Settings(method="direct", light_selection="exact",
                                  light_samples=1024)).lighting[:len(p), 0]

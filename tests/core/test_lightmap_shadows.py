@@ -66,12 +66,7 @@ def test_texels_the_light_tree_samples_poorly_are_estimated_again_weighing_every
     Texels' relative RMSE against 1 024 exactly weighed samples each (measured): the tree alone
     6.1 %, with the noisiest texels estimated again exactly 3.7 % (every texel exactly: 1.7 %).
     Bound 5 %."""
-    fp, fn, ft = shapes.grid(0.7, 8)
-    q, m, u = shapes.icosphere(0.3, 2, inward=False)
-    a, b, c = shapes.grid(4.0, 2, z=3.0, flip=True)
-    sc = shapes.scene([(fp, fn, ft, (0.5,) * 3, (0,) * 3),
-                       (q + np.float32([0, 0, 0.301]), m, u, (0.0,) * 3, (1.0,) * 3),
-                       (a, b, c, (0.0,) * 3, (10.0,) * 3)])
+    sc, _, ft = shapes.floor_under_emissive_sphere(0.7, 8)
     nt = ft.shape[0]
     target = LightmapObject("floor", "floor", corner_vert=ft.ravel().astype(np.int32),
                             corner_triangles=np.arange(3 * nt, dtype=np.int32).reshape(nt, 3),
