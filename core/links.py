@@ -218,10 +218,9 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     alone drop a floor vertex hidden under a box whose triangles reach out in front of it); 1 each
     when the disks' spheres overlap. Else the need of a is the larger of its size as b sees it,
     A_a·cos·cos / (π d² + A_a) with the bounded cosines (the disks', or the surfaces' where the
-    disks face away) and the
-    centres' distance d, and its normal spread as a receiver: b's form factor from a without a's
-    cosine times 2 sin(cone_a / 2) — how far a's leaves' normals may differ from its own — times
-    CONE_WEIGHT. A point
+    disks face away) and the centres' distance d, and its normal spread as a receiver: b's form
+    factor from a without a's cosine times 2 sin(cone_a / 2) — how far a's leaves' normals may
+    differ from its own — times CONE_WEIGHT. A point
     (r = 0, area 0, cone (1, 0)) as a needs nothing itself. With ``sides`` 2 either face counts
     (antiradiance crosses surfaces both ways): the cosines are bounded over both faces."""
     v = pb - pa

@@ -157,11 +157,10 @@ def face_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
 def ray_ends(i: int, j: int, f_ij: float, f_ji: float) -> wp.vec2i:
     """(from, to): which element's point the visibility rays between elements i and j leave from,
     towards the other's own surface, given the form factors f_ij (i receiving from j) and f_ji.
-    Where only one of them receives, from its point: a vertex hidden under an object standing on
-    the floor still sends light from the part of its triangles in front of that object, which its
-    own point cannot see (an object's base got 16 % too little light from the floor in front).
-    Where both do, one ray serves both ways: from the lower-numbered one's, the same either way
-    round."""
+    Where only one of them receives, from its point: what that point sees of the other is what it
+    gets, while the other's point may be hidden (a floor vertex under a box whose triangles reach
+    out in front of it). Where both do, one ray serves both ways: from the lower-numbered one's,
+    the same either way round."""
     if f_ij > 0.0 and not (f_ji > 0.0):
         return wp.vec2i(i, j)
     if f_ji > 0.0 and not (f_ij > 0.0):
