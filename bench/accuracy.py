@@ -3,6 +3,7 @@
     .venv/bin/python bench/accuracy.py [--scenes cornell_box lamp_scene flat_furnace emissive_room
                                                   furnished_room open_scene level]
                                        [--methods direct reference bunnell]
+                                       [--variants contact_levels=2,link_threshold=0.03 ...]
                                        [--samples 16 64 256 1024] [--reference-samples 4096]
                                        [--no-ao] [--device auto|cpu|cuda]
                                        [--passes all|direct [--light-samples 64 128 256]
@@ -15,8 +16,10 @@ the benchmark level at 116 k elements —
 two quantities, each against Cycles bakes of the same vertices at each
 sample count and at a high sample count taken as the truth:
 
-- lighting (DIFFUSE, Direct + Indirect, no Color) for each method of ours: relative RMSE, mean
-  bias, 95th-percentile error (core.metrics.summary); the speedup is measured on relative RMSE;
+- lighting (DIFFUSE, Direct + Indirect, no Color) for each method of ours, and for each of
+  ``--variants`` (the default method with those settings changed, labelled by them): relative
+  RMSE, mean bias, 95th-percentile error (core.metrics.summary); the speedup is measured on
+  relative RMSE;
 - with ``--passes direct`` (issue 20), direct light alone: Cycles' DIFFUSE Direct pass against our
   ``direct`` method at each of ``--light-samples`` shadow rays per receiver and each of
   ``--light-selections`` (no AO);
@@ -139,6 +142,18 @@ def run_quantity(names, quantity, runs, samples, reference_samples, passes=PASSE
             "cycles": cycles, "ours": ours}
 
 
+def variant(label: str, device: str) -> Settings:
+    """The Settings of ``label`` (``name=value,…``: settings fields changed from their defaults,
+    each value read as its default's type)."""
+    defaults = Settings()
+    changed = {}
+    for item in label.split(","):
+        name, _, value = item.partition("=")
+        kind = type(getattr(defaults, name.strip()))
+        changed[name.strip()] = kind(value) if kind is not bool else value.lower() in ("1", "true", "on")
+    return Settings(device=device, **changed).validate()
+
+
 def direct_runs(light_samples, selections, device) -> dict:
     """{label: Settings} of the ``direct`` method at each light sample count and selection."""
     return {f"direct {sel} {n}": Settings(method="direct", light_selection=sel, light_samples=n, device=device)
@@ -155,16 +170,18 @@ def _open(scene_name):
 
 
 def run_scene(scene_name, methods, samples, reference_samples, device, with_ao, passes="all",
-              light_samples=(64,), selections=("auto",)):
+              light_samples=(64,), selections=("auto",), variants=()):
     """One sample scene (``sample_blends``) or scene built in code (``SCENES``);
-    ``passes`` direct compares direct light alone (``direct_runs``, no AO)."""
+    ``passes`` direct compares direct light alone (``direct_runs``, no AO); ``variants``: labels
+    ``name=value,…`` of settings runs of the default method (``variant``)."""
     scene = _open(scene_name)
     names = receivers(scene)
     print(f"{scene_name}: {', '.join(names)}", flush=True)
     out = {"receivers": names, "vertices": int(sum(len(scene.objects[n].data.vertices) for n in names)),
            "reference_samples": reference_samples, "passes": passes}
     runs = (direct_runs(light_samples, selections, device) if passes == "direct"
-            else {m: Settings(method=m, device=device) for m in methods})
+            else {**{m: Settings(method=m, device=device) for m in methods},
+                  **{v: variant(v, device) for v in variants}})
     out["lighting"] = run_quantity(names, "lighting", runs, samples, reference_samples, PASSES[passes])
     if with_ao and passes == "all":
         out["ao_distance"] = float(scene.world.light_settings.distance)
@@ -473,6 +490,8 @@ def main(argv=None) -> int:
     parser.add_argument("--methods", nargs="+", default=light, choices=light)
     parser.add_argument("--samples", nargs="+", type=int, default=[16, 64, 256, 1024])
     parser.add_argument("--reference-samples", type=int, default=4096)
+    parser.add_argument("--variants", nargs="*", default=[],
+                        help="runs of the default method with settings changed: name=value,name=value")
     parser.add_argument("--no-ao", dest="ao", action="store_false", help="leave out AO against Cycles' AO bake")
     parser.add_argument("--device", default="auto", choices=core_settings.DEVICES)
     parser.add_argument("--passes", default="all", choices=sorted(PASSES),
@@ -513,7 +532,7 @@ def main(argv=None) -> int:
                "cpu_count": __import__("os").cpu_count(), "blender": bpy.app.version_string,
                "load_at_start": round(__import__("os").getloadavg()[0], 2),
                "scenes": {s: run_scene(s, args.methods, args.samples, args.reference_samples, args.device, args.ao,
-                                       args.passes, args.light_samples, args.light_selections)
+                                       args.passes, args.light_samples, args.light_selections, args.variants)
                           for s in args.scenes}}
     results["load_at_end"] = round(__import__("os").getloadavg()[0], 2)
     kind = "direct-" if args.passes == "direct" else ""

@@ -78,6 +78,10 @@ SAMPLE_FLOOR = 0.25
 # receives one value for leaves that see a sender very differently, and its per-leaf correction
 # rests on a few samples, so such clusters are split sooner than flat ones.
 CONE_WEIGHT = 4.0
+# Links of a node with an element in a contact (``core.refine``) are refined this much further
+# (measured on the open scene with two contact levels: 1 → 0.74 %, 4 → 0.56 %, 10 → 0.53 %,
+# 40 → 0.51 % from Cycles).
+CONTACT_WEIGHT = 10.0
 # A partly visible link is split while its estimate exceeds this fraction of the threshold.
 PARTIAL = 0.25
 # The largest ratio of a link's sampled unoccluded transfer over its centroid form factor that a
@@ -727,21 +731,32 @@ def _leaf_area(tree) -> np.ndarray:
     return tree.nodes.area.numpy()[:int(tree.level_offsets[1])].astype(np.float64)
 
 
-def weights(tree, lum: np.ndarray) -> wp.array:
+def weights(tree, lum: np.ndarray, contact: np.ndarray | None = None) -> wp.array:
     """float32[m] per-node weights of the oracle: the largest leaf luminance ``lum`` (float64[n],
     leaf order) in each node's subtree over the scene's area-weighted mean, clamped to
     [WEIGHT_LOW, WEIGHT_HIGH]: links touching bright nodes are refined further, links between dim
-    ones stay coarser."""
+    ones stay coarser; × CONTACT_WEIGHT for a node with a leaf in a contact (``contact``: bool[n]
+    per element, ``Problem.contact``), where light changes within millimetres."""
     dev = tree.device
     area = _leaf_area(tree)
     mean = float((lum * area).sum() / max(area.sum(), 1e-30))
+    leaves = lum / mean if mean > 0 else np.ones(len(lum))
+    weight = np.clip(_subtree_max(tree, leaves), WEIGHT_LOW, WEIGHT_HIGH)
+    if contact is not None and contact.any():
+        weight *= np.where(_subtree_max(tree, contact[tree.order.numpy()]) > 0, CONTACT_WEIGHT, 1.0)
+    return wp.array(weight.astype(np.float32), dtype=wp.float32, device=dev.name)
+
+
+def _subtree_max(tree, leaves: np.ndarray) -> np.ndarray:
+    """float32[m]: the largest of ``leaves`` (per leaf, leaf order) in each node's subtree."""
+    dev = tree.device
     values = np.zeros(tree.count, np.float32)
-    values[:len(lum)] = lum / mean if mean > 0 else 1.0
+    values[:len(leaves)] = leaves
     out = wp.array(values, dtype=wp.float32, device=dev.name)
     offs = tree.level_offsets
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_max_kernel, int(offs[lv + 1] - offs[lv]), [int(offs[lv]), tree.nodes, out], dev)
-    return wp.array(np.clip(out.numpy(), WEIGHT_LOW, WEIGHT_HIGH), dtype=wp.float32, device=dev.name)
+    return out.numpy()
 
 
 def sampling(tree, lum: np.ndarray | None = None, floor: float = 0.0,
@@ -950,7 +965,7 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     d = dev.name
     t0 = time.perf_counter()
     lum = None if radiance is None else leaf_luminance(tree, radiance)
-    weight = None if lum is None else weights(tree, lum)
+    weight = None if lum is None else weights(tree, lum, problem.contact)
     # a cluster's visibility is sampled over its open leaves: those buried inside a closed
     # surface get their own share at the push (``enclosure``)
     sm = sampling(tree, lum, SAMPLE_FLOOR, problem.open_fraction.numpy() if oracle.visibility else None)

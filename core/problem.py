@@ -1,6 +1,7 @@
 """The bake problem: built once per bake, shared by every stage and solver.
 
-It holds the scene (recentred: see ``SceneData.recentred``), the settings, the device, the stages
+It holds the scene (recentred: see ``SceneData.recentred``) as given and as the solver sees it
+(its triangles near contacts split: ``core.refine``), the settings, the device, the stages
 (progress, cancellation, timings, warnings), the shading vertices and elements, and everything the
 kernels read, uploaded to the device once: the BVH of all triangles, the lights, and the elements
 as one ``surfels.Surfels`` struct. Direct light per element (and at points of the triangles
@@ -18,6 +19,7 @@ import warp as wp
 from . import device as device_mod
 from . import direct as direct_mod
 from . import elements as elements_mod
+from . import refine as refine_mod
 from . import surfels as surfels_mod
 from .errors import BakeError
 from .scene import SceneData
@@ -30,8 +32,13 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 class Problem:
     """One bake of ``scene`` with ``settings`` (validated here).
 
-    scene: the recentred SceneData; shading: ``elements.ShadingVertices``; elements:
-    ``elements.Elements`` (host arrays); surfels: the same on the device (``surfels.Surfels``); mesh: the
+    source: the recentred SceneData, whose vertices and triangles targets want results on;
+    refinement: its triangles split near contacts (``refine.Refinement``, ``contact_levels``);
+    scene: ``source`` so split, what the solver and the BVH work on (the source's vertices first,
+    so a source triangle's vertices keep their indices); shading: ``source``'s
+    ``elements.ShadingVertices``; elements: ``elements.Elements`` (host arrays) of ``scene``, one
+    per its shading vertex, ``shading``'s first (element i is shading vertex i below
+    ``shading.count``); surfels: the same on the device (``surfels.Surfels``); mesh: the
     ``wp.Mesh`` BVH; lights: ``direct.Lights``; far: a length (m) beyond the scene; stages:
     ``core.stages.Stages``; counts: what was made and traced, for the report.
     """
@@ -46,38 +53,54 @@ class Problem:
         if scene.num_triangles == 0:
             raise BakeError("nothing to bake: the scene has no triangles")
         st = self.stages
-        self.scene = scene = _reflecting(scene, st).recentred()
+        self.source = source = _reflecting(scene, st).recentred()
         self.device = st.run("device", device_mod.select, settings.device)
         st.run("kernels", device_mod.load_kernels, self.device,
                lambda: st.report("compiling kernels (first bake only, cached afterwards)", 0.0))
-        degenerate = ~(scene.triangle_areas() > 0)
+        degenerate = ~(source.triangle_areas() > 0)
         if degenerate.any():
-            names = sorted({scene.object_names[i] for i in np.unique(scene.tri_object[degenerate])})
+            names = sorted({source.object_names[i] for i in np.unique(source.tri_object[degenerate])})
             st.warn(f"{int(degenerate.sum())} zero-area triangles ignored in {', '.join(names)}")
-        self.shading = st.run("elements", elements_mod.shading_vertices, scene)
-        self.elements = els = st.run("elements", elements_mod.build, scene, self.shading)
         d = self.device.name
-        self.mesh = st.run("bvh", _mesh, scene, d)
+        self.shading = st.run("elements", elements_mod.shading_vertices, source)
+        self.mesh = st.run("bvh", _mesh, source, d)
+        self.refinement = st.run("refine", refine_mod.contacts, source, self.mesh, settings.contact_levels,
+                                 self.device)
+        scene, self._solving = self._refined(source, self.shading)
+        if self.refinement.starts[-1]:
+            self.mesh = st.run("bvh", _mesh, scene, d)
+        self.elements = els = st.run("elements", elements_mod.build, scene, self._solving)
         extent = float(np.linalg.norm(scene.positions.max(axis=0) - scene.positions.min(axis=0))) or 1.0
         self.far = extent * 1e3 + 1e3
         self.scene = scene = _escaping(scene, self.mesh, self.far, d, st)
+        self.source = replace(source, lamps=scene.lamps)
         self.lights = st.run("bvh", direct_mod.Lights, scene, self.device)
         self.surfels = surfels_mod.upload(els, self.mesh, d)
         # The solution of the previous frame of an animation (``pipeline.Sequence``), which
         # iterating solvers start from; None for a first or single frame.
         self.previous = None
         self._links = {}
-        self.counts = {"objects": len(scene.object_names), "triangles": scene.num_triangles,
-                       "vertices": scene.num_vertices, "shading_vertices": self.shading.count,
+        self.counts = {"objects": len(scene.object_names), "triangles": source.num_triangles,
+                       "vertices": source.num_vertices, "shading_vertices": self.shading.count,
+                       "contact_triangles": scene.num_triangles - source.num_triangles,
                        "elements": els.count, "lamps": len(scene.lamps),
                        "emissive_triangles": self.lights.num_emitters, "rays": 0}
+
+    def _refined(self, source: SceneData, shading) -> tuple:
+        """(the scene the solver works on: ``source`` with ``refinement`` applied, its shading
+        vertices, those of ``source`` (``shading``) first and in order)."""
+        if not self.refinement.starts[-1]:
+            return source, shading
+        scene = self.refinement.apply(source)
+        return scene, refine_mod.shading(self.refinement, shading, elements_mod.shading_vertices(scene),
+                                         source.num_vertices)
 
     def shading_of(self, scene: SceneData):
         """The shading vertices of ``scene`` when it has this problem's vertices, triangles and
         split (so the problem can ``move`` to it), else None. A flat-shaded mesh that deforms can
         change its split (coplanar faces stop being coplanar): its elements change then."""
-        if scene.num_vertices != self.scene.num_vertices or not np.array_equal(scene.triangles,
-                                                                                self.scene.triangles):
+        if scene.num_vertices != self.source.num_vertices or not np.array_equal(scene.triangles,
+                                                                                 self.source.triangles):
             return None
         shading = elements_mod.shading_vertices(scene)
         return shading if np.array_equal(shading.corner, self.shading.corner) else None
@@ -85,29 +108,35 @@ class Problem:
     def move(self, scene: SceneData, shading=None) -> None:
         """Take the positions, normals, materials and lamps of ``scene`` — the same triangles and
         vertices, deformed or moved (an animation frame) — keeping this problem's frame, device
-        arrays and BVH (refitted) and the tree (refitted) if built; ``shading``: the scene's split
-        when known (``shading_of``). Direct light is traced again when next asked for."""
-        if (scene.num_vertices, scene.num_triangles) != (self.scene.num_vertices, self.scene.num_triangles):
+        arrays, contact refinement and BVH (refitted) and the tree (refitted) if built; ``shading``:
+        the scene's split when known (``shading_of``). Direct light is traced again when next asked
+        for."""
+        if (scene.num_vertices, scene.num_triangles) != (self.source.num_vertices, self.source.num_triangles):
             raise BakeError("the scene's topology changed: build a new problem")
         try:
             scene.validate()
         except ValueError as exc:
             raise BakeError(str(exc)) from None
         scene = _reflecting(scene, self.stages)
-        shift = np.asarray(scene.origin, np.float64) - self.scene.origin
+        shift = np.asarray(scene.origin, np.float64) - self.source.origin
         positions = (np.asarray(scene.positions, np.float64) + shift).astype(np.float32)
         lamps = replace(scene.lamps, position=(np.asarray(scene.lamps.position, np.float64)
                                                 + shift).astype(np.float32))
-        self.scene = scene = replace(scene, positions=positions, lamps=lamps, origin=self.scene.origin)
-        shading = shading if shading is not None else elements_mod.shading_vertices(scene)
+        source = replace(scene, positions=positions, lamps=lamps, origin=self.source.origin)
+        shading = shading if shading is not None else elements_mod.shading_vertices(source)
         if not np.array_equal(shading.corner, self.shading.corner):
             raise BakeError("the scene's shading vertices changed: build a new problem")
         # the split is the scene's; its positions are taken in this problem's frame
         self.shading = shading = replace(shading, position=np.ascontiguousarray(positions[shading.vertex]))
-        self.elements = els = elements_mod.build(scene, self.shading)
-        self.mesh.points.assign(positions)
+        scene, solving = self._refined(source, shading)
+        if not np.array_equal(solving.corner, self._solving.corner):
+            raise BakeError("the scene's shading vertices changed: build a new problem")
+        self._solving = solving
+        self.elements = els = elements_mod.build(scene, solving)
+        self.mesh.points.assign(scene.positions)
         self.mesh.refit()
         self.scene = scene = _escaping(scene, self.mesh, self.far, self.device.name, self.stages)
+        self.source = replace(source, lamps=scene.lamps)
         self.lights = direct_mod.Lights(scene, self.device)
         surfels_mod.assign(self.surfels, els)
         self.__dict__.pop("direct", None)
@@ -119,6 +148,13 @@ class Problem:
             from . import hierarchy
 
             hierarchy.refit(self.tree, self.surfels)
+
+    @cached_property
+    def contact(self) -> np.ndarray:
+        """bool[n]: the elements with a triangle split near a contact (``core.refine``)."""
+        per = np.zeros(self.elements.count, bool)
+        np.logical_or.at(per, self.elements.corner.reshape(-1), np.repeat(self.refinement.split, 3))
+        return per
 
     @property
     def element_sizes(self) -> np.ndarray:

@@ -88,14 +88,14 @@ def at_elements(problem) -> Receivers:
 def on_triangles(problem, triangles: np.ndarray, bary: np.ndarray, points: np.ndarray,
                  normals: np.ndarray, sizes: np.ndarray, label: str = "receiver",
                  grids: Optional[list] = None, part: Optional[Part] = None) -> Receivers:
-    """Receivers on the scene's triangles (lightmap texels): ``triangles`` int32[R] scene triangle
-    of each, ``bary`` float32[R,3] its barycentric coordinates there (interpolation weights of the
-    triangle's corner elements); points, normals float32[R,3] and sizes float32[R] as sampled;
-    label, grids, part: see ``Receivers``."""
-    scene = problem.scene
+    """Receivers on the scene's triangles (lightmap texels): ``triangles`` int32[R] triangle of
+    ``problem.source`` of each, ``bary`` float32[R,3] its barycentric coordinates there
+    (interpolation weights of the triangle's corner elements, its shading vertices); points,
+    normals float32[R,3] and sizes float32[R] as sampled; label, grids, part: see ``Receivers``."""
+    scene = problem.source
     return Receivers(points=points, normals=normals, sizes=sizes, albedo=scene.albedo[triangles],
                      emission=scene.emission[triangles],
-                     elements=problem.elements.corner[triangles],
+                     elements=problem.shading.corner[triangles],
                      weights=np.asarray(bary, np.float32), label=label, grids=grids, part=part)
 
 

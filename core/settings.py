@@ -160,6 +160,11 @@ class Settings:
                                     "factor bound) a link between two element clusters may carry; "
                                     "smaller makes more, finer links (slower, more accurate)",
                                     "solver", low=1e-5, high=1.0, digits=4)
+    contact_levels: int = _option(0, "Contact Levels", "times triangles are split where "
+                                  "another surface comes within their size (an object standing "
+                                  "on a floor, shelves against a wall): finer elements in the gap, "
+                                  "where the light changes fastest; 0: elements as the mesh has them",
+                                  "solver", low=0, high=6)
     link_memory: int = _option(4096, "Link Memory", "memory budget of the links (MB); a scene that "
                                "would need more gets coarser links, with a warning", "solver",
                                low=1, soft_high=65536)

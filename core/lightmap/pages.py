@@ -242,7 +242,7 @@ class Layout:
 def lay_out(request: LightmapRequest, problem) -> Layout:
     """Group the objects of ``request`` into pages, unwrapping (xatlas, stage ``unwrap``) those
     without reusable ``Lightmap`` UVs and sizing the pages of the others by their texel density."""
-    settings, stages, scene = problem.settings, problem.stages, problem.scene
+    settings, stages, scene = problem.settings, problem.stages, problem.source
     if not request.targets:
         raise BakeError("no object to lightmap")
     groups, warnings = _plan(request.targets, settings)
@@ -316,7 +316,7 @@ def rasterize(layout: Layout, problem, only: Optional[range] = None) -> list:
     """Each page's texels (stage ``raster``): per page (``raster.Texels`` at ``supersample``² samples
     per texel, int[N] scene triangle of each, float32[N,3] surface points and normals, float32[N]
     metres per sample there); only: the indices of the pages to rasterise (default all)."""
-    scene, dev, s = problem.scene, problem.device, problem.settings.supersample
+    scene, dev, s = problem.source, problem.device, problem.settings.supersample
     out = []
     for k in range(len(layout.pages)) if only is None else only:
         (w, h) = layout.pages[k][3]

@@ -31,6 +31,9 @@ class Target:
         return receivers_mod.at_elements(problem)
 
     def finish(self, problem, receivers, light: receivers_mod.Light) -> VertexLight:
-        return VertexLight(lighting=(light.direct + light.indirect).astype(np.float32),
-                           direct=light.direct, indirect=light.indirect, output=light.output,
+        # the elements the solver added near contacts (``core.refine``) come after the shading
+        # vertices: none of them is on the scene's own vertices
+        s = slice(problem.shading.count)
+        return VertexLight(lighting=(light.direct[s] + light.indirect[s]).astype(np.float32),
+                           direct=light.direct[s], indirect=light.indirect[s], output=light.output[s],
                            shading=problem.shading)
