@@ -11,11 +11,15 @@ floor alone there, in Blender, moved the whole scene's error 0.85 → 0.67 %, an
 
 So the solver works on a copy of the scene whose triangles near a contact are split: a
 triangle is *near* when a ray along its normal from one of POINTS of it meets another surface's
-front closer than REACH × its longest edge (but not closer than TOUCH × it: faces pressed together, the
-floor under a box, see nothing and gain nothing from splitting). Near triangles are split into
-four at their edges' midpoints; a neighbour sharing one split edge is split in two, one sharing
-two or three is split in four (conforming: no vertex of one triangle lies on another's edge, so
-surfaces stay closed). This repeats ``levels`` times on the triangles made. The scene's own
+front closer than REACH × its longest edge, and that surface's triangles are no finer (only the
+coarser side of a gap is split: the finer side's light varies less across one of its triangles,
+and splitting both sides of the open scene's contact cost twice the time for no gain) — but not
+closer than TOUCH × it: faces pressed together, the floor under a box, see nothing and gain
+nothing from splitting. Near triangles are split into four at their edges' midpoints, the
+nearest first and at most BUDGET added; a neighbour sharing one split edge is split in two, one
+sharing two or three in four (conforming: no vertex of one triangle lies on another's edge, so
+surfaces stay closed). This repeats ``levels`` times on the triangles made. The links of
+clusters holding a split element are refined further (``links.CONTACT_WEIGHT``). The scene's own
 vertices and triangles are untouched: results are wanted there (``Problem.shading``), and the
 refinement is a fixed map from them (``Refinement.apply``), so a deforming mesh keeps it.
 """
@@ -51,10 +55,9 @@ class Refinement:
 
     pairs: int32[M,2] the two vertices each new vertex is the midpoint of (vertex V + k for row
     k); starts: int32[L+1] where each level's rows begin (a row names vertices of earlier levels
-    only); triangles: int32[T',3] the split
-    triangles over the V + M vertices, counter-clockwise as their parents; parent: int32[T'] the
-    scene triangle each lies in; bary: float64[T',3,3] its corners' barycentric coordinates in
-    that parent.
+    only); triangles: int32[T',3] the split triangles over the V + M vertices, counter-clockwise
+    as their parents; parent: int32[T'] the scene triangle each lies in; bary: float64[T',3,3]
+    its corners' barycentric coordinates in that parent.
     """
 
     pairs: np.ndarray
@@ -78,7 +81,8 @@ class Refinement:
         v = scene.num_vertices
         for lo, hi in zip(self.starts[:-1], self.starts[1:]):
             p[v + lo:v + hi] = 0.5 * (p[self.pairs[lo:hi, 0]] + p[self.pairs[lo:hi, 1]])
-        normals = np.einsum("tck,tkd->tcd", self.bary, np.asarray(scene.corner_normals, np.float64)[self.parent])
+        corner_normals = np.asarray(scene.corner_normals, np.float64)[self.parent]
+        normals = np.einsum("tck,tkd->tcd", self.bary, corner_normals)
         length = np.linalg.norm(normals, axis=2, keepdims=True)
         normals = np.where(length > 0, normals / np.where(length > 0, length, 1.0), normals)
         # a corner on one of the parent's corners keeps that corner's normal exactly
@@ -156,7 +160,8 @@ def contacts(scene: SceneData, mesh: wp.Mesh, levels: int, device) -> Refinement
         split = _closure(tris, near)
         sizes[np.unique(parent[split.any(axis=1)])] *= 0.5
         tris, parent, bary, new_pairs = _split(tris, parent, bary, split, len(positions))
-        positions = np.concatenate([positions, 0.5 * (positions[new_pairs[:, 0]] + positions[new_pairs[:, 1]])])
+        middle = 0.5 * (positions[new_pairs[:, 0]] + positions[new_pairs[:, 1]])
+        positions = np.concatenate([positions, middle])
         pairs = np.concatenate([pairs, new_pairs])
         starts.append(len(pairs))
     return Refinement(pairs=pairs.astype(np.int32), starts=np.asarray(starts, np.int32),
@@ -234,5 +239,6 @@ def shading(refinement: Refinement, source: ShadingVertices, split: ShadingVerti
     new = rank < 0
     rank[new] = source.count + np.arange(int(new.sum()))
     order = np.argsort(rank)
-    return ShadingVertices(position=split.position[order], normal=split.normal[order], vertex=split.vertex[order],
+    return ShadingVertices(position=split.position[order], normal=split.normal[order],
+                           vertex=split.vertex[order],
                            corner=rank[split.corner].astype(np.int32))

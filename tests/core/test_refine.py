@@ -54,6 +54,33 @@ def test_the_coarser_side_of_a_gap_is_split_into_the_same_surface_without_cracks
     assert problem.counts["contact_triangles"] == refined.num_triangles - source.num_triangles
 
 
+def test_split_copy_keeps_the_scenes_shading_vertices_first_across_hard_edges():
+    """A flat-shaded 1 m cube of 12 triangles (each corner vertex three shading vertices, one per
+    face) 2 cm over a floor of 12.5 cm quads: the cube's bottom is the coarser side and is split,
+    the floor is not; the split copy's first elements are the scene's shading vertices — same
+    vertex and normal, and points within the 1 % border nudge (``elements.NUDGE``: a face's
+    corner moves towards its largest triangle, which the split makes smaller) — and the bake's
+    vertex results are per those."""
+    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], np.float32)
+    cube_p = corners - np.float32([0.5, 0.5, -0.02])
+    cube_t = np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
+                       [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]], np.int32)
+    fp, fn, ft = shapes.grid(2.0, 16)
+    scene = shapes.scene([(fp, fn, ft, FLOOR_ALBEDO, (0,) * 3),
+                          (cube_p, shapes.flat(cube_p, cube_t), cube_t, BOX_ALBEDO, (0,) * 3)],
+                         shapes.lamp(LAMP_SUN, direction=(0.4, -0.3, -0.87), power=(3,) * 3))
+    problem = Problem(scene, Settings(contact_levels=2, device="cpu"))
+    split = split_parents(problem)
+    assert len(split) and (problem.source.tri_object[split] == 1).all()
+    shading, els = problem.shading, problem.elements
+    assert shading.count == len(fp) + 24 and els.count > shading.count
+    np.testing.assert_array_equal(els.vertex[:shading.count], shading.vertex)
+    np.testing.assert_array_equal(els.normal[:shading.count], shading.normal)
+    np.testing.assert_allclose(els.position[:shading.count], shading.position, atol=0.01 * 2 ** 0.5)
+    lighting = bake(scene, Settings(contact_levels=2, device="cpu", light_samples=16))["vertices"].lighting
+    assert lighting.shape == (shading.count, 3) and np.isfinite(lighting).all()
+
+
 def test_faces_pressed_together_are_not_split():
     """A box resting on the floor hides the floor under it: nothing there can be seen, so
     nothing is split (the rays meet the box closer than TOUCH × the triangle)."""
