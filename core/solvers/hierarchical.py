@@ -119,13 +119,9 @@ def transfer_at(t: Nodes, s: Surfels, ls: LinkSet, j: int, p: wp.vec3, n: wp.vec
     crate's faces other than the one by the sender), and the link would bring its leaves that do
     face the sender nothing."""
     f = ls.transfer[j]
-    if scaled != 0:
-        norm = ls.form_factor[j]
-        ff = sided_ff(t, s, p, n, ls.sender[j], sides)
-        if norm > 0.0:
-            f = ff * f / norm
-        else:
-            f = ff * float(ls.visible[j]) / 255.0
+    norm = ls.form_factor[j]
+    if scaled != 0 and norm > 0.0:
+        f = sided_ff(t, s, p, n, ls.sender[j], sides) * f / norm
     return f
 
 
