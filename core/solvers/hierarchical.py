@@ -113,11 +113,7 @@ def transfer_at(t: Nodes, s: Surfels, ls: LinkSet, j: int, p: wp.vec3, n: wp.vec
                 sides: int) -> float:
     """Link j's transfer at point p (unit normal n) of its receiver: as stored (the receiver's
     average), or ``scaled`` by the sender's form factor from p (``sided_ff``: its front, or both
-    faces for ``sides`` 2 as the links were made) over the link's normaliser — or, where none of
-    the link's samples saw the sender (normaliser 0), that form factor times the link's visible
-    fraction: a receiving cluster's few samples can all fall on its leaves that face away (a
-    crate's faces other than the one by the sender), and the link would bring its leaves that do
-    face the sender nothing."""
+    faces for ``sides`` 2 as the links were made) over the link's normaliser."""
     f = ls.transfer[j]
     norm = ls.form_factor[j]
     if scaled != 0 and norm > 0.0:
