@@ -141,6 +141,10 @@ def gaps(positions: np.ndarray, triangles: np.ndarray, mesh: wp.Mesh, sizes: np.
 def contacts(scene: SceneData, mesh: wp.Mesh, levels: int, device) -> Refinement:
     """The ``Refinement`` of ``scene`` (its BVH ``mesh``, on ``device``) over ``levels`` levels."""
     t0 = scene.num_triangles
+    if levels <= 0:  # nothing split: the scene's own triangles, each its own parent
+        return Refinement(pairs=np.zeros((0, 2), np.int32), starts=np.zeros(1, np.int32),
+                          triangles=np.asarray(scene.triangles, np.int32),
+                          parent=np.arange(t0, dtype=np.int32), bary=np.broadcast_to(np.eye(3), (t0, 3, 3)))
     tris = np.asarray(scene.triangles, np.int64)
     positions = np.asarray(scene.positions, np.float64)
     parent = np.arange(t0)
