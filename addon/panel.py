@@ -50,7 +50,7 @@ class RENDER_PT_radiosity_bake(bpy.types.Panel):
         col.prop(s, "device")
         col = layout.column(align=True)
         for name in ("light_samples", "light_selection", "visibility_rays", "link_threshold",
-                     "contact_levels", "directional_bins", "bounces", "ao_distance"):
+                     "gather_rays", "contact_levels", "directional_bins", "bounces", "ao_distance"):
             _prop(col, s, name)
         layout.prop(s, "bake_copy")
         _farm(layout, s)

@@ -44,13 +44,14 @@ def exitance(problem, direct: wp.array, indirect: wp.array, out: wp.array) -> wp
     return out
 
 
-def iterate(problem, sweep, sweeps: int, changes: list | None = None) -> tuple[np.ndarray, int, wp.array, wp.array]:
+def iterate(problem, sweep, sweeps: int, changes: list | None = None,
+            start: np.ndarray | None = None) -> tuple[np.ndarray, int, wp.array, wp.array]:
     """Jacobi sweeps ``sweep(direct, current, out, k)`` (vec3[n] device arrays: the problem's
     direct lighting, the indirect lighting so far, the next; k the sweep's number from 1) until the
     largest change is below ``tolerance`` × the largest lighting value, or ``sweeps`` of them.
     Returns (float32[n,3] the last indirect lighting, sweeps made, the direct lighting and the
-    last indirect lighting on the device). An animation's previous frame (``problem.previous``)
-    is the starting point: its light has mostly converged already. ``changes``, when given, gets
+    last indirect lighting on the device). ``start`` (float32[n,3]) is the starting point, else
+    an animation's previous frame (``problem.previous``): its light has mostly converged already. ``changes``, when given, gets
     each sweep's largest change over the largest lighting value (the convergence measure).
     Raises BakeError when the sweeps diverge (the change grows past ``GROWTH``, or a value is not
     finite), so that no NaN or infinite lighting is ever written."""
@@ -58,7 +59,12 @@ def iterate(problem, sweep, sweeps: int, changes: list | None = None) -> tuple[n
     d = problem.device.name
     n = problem.elements.count
     dev_direct = wp.array(direct, dtype=wp.vec3, device=d)
-    before = problem.previous.values if problem.previous is not None else np.zeros((n, 3), np.float32)
+    if start is not None:
+        before = np.asarray(start, np.float32)
+    elif problem.previous is not None:
+        before = problem.previous.values
+    else:
+        before = np.zeros((n, 3), np.float32)
     current = wp.array(before, dtype=wp.vec3, device=d)
     nxt = wp.zeros(n, dtype=wp.vec3, device=d)
     scale_direct = float(np.abs(direct).max(initial=0.0))

@@ -34,8 +34,10 @@ def shadow_edge_scene():
 def test_receiver_over_a_shadow_edge_sees_the_shadowed_part_of_the_floor_element_under_it():
     """The receiver's four corners lie 9–11 cm from the shadow's edge, inside floor elements that
     the edge crosses: they see ρ D over the lit half-plane only, 1.8–2.6 % of it (analytic). Bound
-    25 %; measured 1.9–3.0 % (+8 … +17 %). The floor elements' averages alone give 13–27 %."""
-    problem = Problem(shadow_edge_scene(), Settings(method="hierarchical", device="cpu"))
+    25 %; measured 1.9–3.0 % (+8 … +17 %). The floor elements' averages alone give 13–27 %.
+    The links' own last bounce (no gather rays): the final gather by rays is tested on the same
+    scene in test_hits.py."""
+    problem = Problem(shadow_edge_scene(), Settings(method="hierarchical", device="cpu", gather_rays=0))
     els = problem.elements
     pos = els.position + problem.scene.origin
     floor = np.abs(pos[:, 2]) < 1e-6

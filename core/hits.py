@@ -1,0 +1,191 @@
+"""What each element's hemisphere rays hit: the hierarchical solver's final gather (issue 21).
+
+Links carry light between clusters with a visibility sampled between some of their leaves, and an
+element sends one radiance over its whole fan. Where light changes within an element's size — a
+gap under a sofa, the floor under a sphere, the wall behind shelves, Suzanne's chin on a table —
+both are wrong, and more, finer links buy accuracy only at Cycles' own rate (measured in the
+furnished room of ``bench/real_scenes.py``). A final gather by rays sees what each element actually
+sees: ``trace`` sends RAYS cosine-distributed rays from every element (an R2 set shifted per
+element) and keeps where each first meets a front face (triangle and barycentric coordinates;
+misses, back faces and mesh lights' own light send nothing here: the direct light holds them).
+The light an element then receives is the mean radiance at those points,
+
+    I_e = 1/K Σ_k ρ(h_k) ⊙ (D(h_k) + Σ_c b_c(h_k) I_c)
+
+(cosine-distributed directions make the lighting irradiance/π the plain mean of the radiances
+seen), with D(h) the direct light at the hit: where the triangle's direct light varies, that of
+its nearest point among the near field's traced points (``nearfield.Detail``, looked up in
+``nearest_table``), so a shadow edge inside a triangle stays sharp; elsewhere its corners'
+interpolated; and I interpolated between its corners.
+The direct part does not change between sweeps, so ``trace`` sums it once (``Hits.direct``); a
+sweep (``sweep``) only interpolates the corners' indirect light. The solver starts the sweeps
+from its links' solution and runs them until they converge: each sweep is one more bounce with
+the rays' visibility and the hit points' own light, where the links' cluster averages stood.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import warp as wp
+
+from . import device as device_mod
+from .formfactor import tangent_frame
+from .nearfield import Detail
+from .rays import lift
+from .surfels import Surfels
+
+wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
+
+# The R2 sequence's generator (the plastic number): low-discrepancy directions per element.
+PLASTIC = 1.32471795724474602596
+# The near field's traced point nearest to a hit is looked up in a GRID × GRID table over the
+# barycentric square (measured as on an equilateral triangle), not searched among all of them.
+GRID = 32
+# Bytes a ray's hit takes: its triangle (int32) and two float16 barycentric coordinates.
+BYTES_PER_RAY = 8
+
+
+@wp.struct
+class Hits:
+    """K rays per element, element e's at rows e·K … e·K + K − 1. face: int32[n·K] the front
+    face first hit (−1: none, or a back face); bary: vec2h[n·K] its barycentric weights of the
+    triangle's corners 0 and 1 (corner 2 gets the rest); direct: vec3[n] the mean over the rays of
+    ρ ⊙ D at the hits (irradiance/π), which the sweeps do not change; rays: K."""
+
+    face: wp.array(dtype=wp.int32)
+    bary: wp.array(dtype=wp.vec2h)
+    direct: wp.array(dtype=wp.vec3)
+    rays: int
+
+
+@wp.func
+def _nearest(table: wp.array(dtype=wp.int32), u: float, v: float) -> int:
+    """The traced point (``nearest_table``) nearest to barycentric weights (u, v, 1 − u − v)."""
+    i = wp.clamp(int(u * float(GRID)), 0, GRID - 1)
+    j = wp.clamp(int(v * float(GRID)), 0, GRID - 1)
+    return table[i * GRID + j]
+
+
+@wp.func
+def _corners(s: Surfels, corner: wp.array(dtype=wp.int32), f: int) -> wp.vec3i:
+    return wp.vec3i(corner[3 * f], corner[3 * f + 1], corner[3 * f + 2])
+
+
+@wp.func
+def _mix(values: wp.array(dtype=wp.vec3), c: wp.vec3i, u: float, v: float) -> wp.vec3:
+    """values at a triangle's corners c interpolated at barycentric weights (u, v, 1 − u − v)."""
+    return values[c[0]] * u + values[c[1]] * v + values[c[2]] * (1.0 - u - v)
+
+
+@wp.kernel
+def _trace_kernel(offset: int, mesh: wp.uint64, s: Surfels, corner: wp.array(dtype=wp.int32), nf: Detail,
+                  table: wp.array(dtype=wp.int32),
+                  direct: wp.array(dtype=wp.vec3), size: wp.array(dtype=wp.float32), rays: int, far: float,
+                  seed: int, face: wp.array(dtype=wp.int32), bary: wp.array(dtype=wp.vec2h),
+                  out: wp.array(dtype=wp.vec3)):
+    """Element e: its rays' hits, and their mean ρ ⊙ D into out[e]."""
+    e = wp.tid() + offset
+    n = s.nrm[e]
+    tu, tv = tangent_frame(n)
+    origin = lift(s.pos[e], n, size[e])
+    state = wp.rand_init(seed, e)
+    shift0 = wp.randf(state)
+    shift1 = wp.randf(state)
+    detail = nf.row.shape[0] > 0
+    acc = wp.vec3(0.0)
+    for k in range(rays):
+        u0 = wp.mod(shift0 + float(k) / PLASTIC, 1.0)
+        u1 = wp.mod(shift1 + float(k) / (PLASTIC * PLASTIC), 1.0)
+        r = wp.sqrt(u0)
+        phi = 2.0 * math.pi * u1
+        d = tu * (r * wp.cos(phi)) + tv * (r * wp.sin(phi)) + n * wp.sqrt(wp.max(1.0 - u0, 0.0))
+        q = wp.mesh_query_ray(mesh, origin, d, far)
+        row = e * rays + k
+        if q.result and wp.dot(q.normal, d) < 0.0:
+            face[row] = q.face
+            bary[row] = wp.vec2h(wp.float16(q.u), wp.float16(q.v))
+            c = _corners(s, corner, q.face)
+            light = _mix(direct, c, q.u, q.v)
+            if detail:
+                traced = nf.row[q.face]
+                if traced >= 0:
+                    light = nf.light[traced, _nearest(table, q.u, q.v)]
+            acc += wp.cw_mul(_mix(s.albedo, c, q.u, q.v), light)
+        else:
+            face[row] = -1
+    out[e] = acc / float(rays)
+
+
+@wp.kernel
+def _sweep_kernel(offset: int, h: Hits, s: Surfels, corner: wp.array(dtype=wp.int32),
+                  indirect: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    """Element e: I_e = direct part + 1/K Σ_k ρ(h_k) ⊙ I(h_k) over its stored hits."""
+    e = wp.tid() + offset
+    acc = wp.vec3(0.0)
+    for row in range(e * h.rays, (e + 1) * h.rays):
+        f = h.face[row]
+        if f >= 0:
+            u = float(h.bary[row][0])
+            v = float(h.bary[row][1])
+            c = _corners(s, corner, f)
+            acc += wp.cw_mul(_mix(s.albedo, c, u, v), _mix(indirect, c, u, v))
+    out[e] = h.direct[e] + acc / float(h.rays)
+
+
+def nearest_table(bary: np.ndarray) -> np.ndarray:
+    """int32[GRID²]: for each cell (i, j) of the barycentric square (weights of corners 0 and 1),
+    the index of the point of ``bary`` (float32[P,3], ``nearfield.barycentric``) nearest to its
+    centre on an equilateral triangle."""
+    corners = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, math.sqrt(0.75)]])
+    c = (np.arange(GRID) + 0.5) / GRID
+    u, v = np.meshgrid(c, c, indexing="ij")
+    cells = np.stack([u.ravel(), v.ravel(), 1.0 - u.ravel() - v.ravel()], axis=1) @ corners
+    points = np.asarray(bary, np.float64) @ corners
+    d = ((cells[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+    return d.argmin(axis=1).astype(np.int32)
+
+
+def bytes_needed(elements: int, rays: int) -> int:
+    """Bytes the hits of ``rays`` rays from each of ``elements`` elements take."""
+    return int(elements) * int(rays) * BYTES_PER_RAY
+
+
+def trace(problem, rays: int) -> Hits:
+    """The ``Hits`` of ``rays`` cosine-distributed rays from each element of ``problem`` (rays
+    counted in ``problem.counts``), the near field's traced direct light (``problem.near``) at
+    the hits where it varies."""
+    dev, s, els = problem.device, problem.surfels, problem.elements
+    d = dev.name
+    n = els.count
+    h = Hits()
+    h.rays = int(rays)
+    h.face = wp.empty(n * rays, dtype=wp.int32, device=d)
+    h.bary = wp.empty(n * rays, dtype=wp.vec2h, device=d)
+    h.direct = wp.empty(n, dtype=wp.vec3, device=d)
+    corner = wp.array(np.ascontiguousarray(els.corner.reshape(-1), np.int32), dtype=wp.int32, device=d)
+    sizes = wp.array(problem.element_sizes.astype(np.float32), dtype=wp.float32, device=d)
+    direct = wp.array(problem.direct, dtype=wp.vec3, device=d)
+    nf = problem.near
+    table = wp.array(nearest_table(nf.bary.numpy()), dtype=wp.int32, device=d)
+    device_mod.launch(_trace_kernel, n, [problem.mesh.id, s, corner, nf, table, direct, sizes, h.rays,
+                                         float(problem.far), int(problem.settings.seed) + 104729, h.face,
+                                         h.bary, h.direct], dev)
+    problem.counts["rays"] += n * rays
+    return h
+
+
+class Sweep:
+    """One bounce over the hits of ``problem``'s elements: ``sweep(indirect, out)`` (vec3[n]
+    device arrays, lighting irradiance/π) sets out to what the elements receive when they send
+    ρ ⊙ (D + indirect)."""
+
+    def __init__(self, problem, hits: Hits):
+        self.problem, self.hits = problem, hits
+        self.corner = wp.array(np.ascontiguousarray(problem.elements.corner.reshape(-1), np.int32),
+                               dtype=wp.int32, device=problem.device.name)
+
+    def __call__(self, indirect: wp.array, out: wp.array) -> None:
+        p = self.problem
+        device_mod.launch(_sweep_kernel, p.elements.count,
+                          [self.hits, p.surfels, self.corner, indirect, out], p.device)
