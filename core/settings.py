@@ -143,7 +143,8 @@ class Settings:
                                    "receivers × emitters stay under 134 million, else the tree", "solver",
                                    choices=LIGHT_SELECTIONS)
     visibility_rays: int = _option(4, "Visibility Rays", "rays per element pair (reference) or "
-                                   "link (hierarchical) for the visibility of indirect light; "
+                                   "link (hierarchical; one with Gather Rays, whose links only "
+                                   "start the bounces) for the visibility of indirect light; "
                                    "sample pairs of a link's unoccluded transfer (implicit, "
                                    "antiradiance)",
                                    "solver", low=1, high=255,
@@ -160,13 +161,14 @@ class Settings:
                                     "factor bound) a link between two element clusters may carry; "
                                     "smaller makes more, finer links (slower, more accurate; with "
                                     "Gather Rays the links only start the gather's bounces and are "
-                                    "made at 0.5 at least)",
+                                    "made at 0.5 at least, unless Texel Links gathers texels over "
+                                    "them)",
                                     "solver", low=1e-5, high=1.0, digits=4)
     gather_rays: int = _option(256, "Gather Rays", "rays from each element for the final "
                                "gather (hierarchical): what each element sees, bounced until it "
                                "converges, in place of the links' cluster averages; more is "
-                               "smoother and slower (scenes under 16 k elements get more, up to "
-                               "4 M rays in all); 0: the links' own last bounce", "solver",
+                               "smoother and slower (scenes under 8 k elements get more, up to "
+                               "2 M rays in all); 0: the links' own last bounce", "solver",
                                low=0, high=4096, soft_high=1024)
     contact_levels: int = _option(0, "Contact Levels", "times triangles are split where "
                                   "another surface comes within their size (an object standing "

@@ -52,17 +52,18 @@ from .base import Solution, exitance, iterate, reconstruct_with_detail
 # of evaluating everything at every leaf).
 LEAF_LIMIT = 1024
 # With the final gather by rays (``core.hits``) the links only give its sweeps their start, and the
-# sweeps converge to the same light from any (measured: the furnished room and the open scene of
-# bench/real_scenes.py identical to 0.1 % at thresholds 0.1, 0.5 and 1.0), so they are made coarse:
-# 0.5 took the room 3.98 → 2.67 s and the level's links 37.5 → 13.4 s; at 1.0 the links' own
-# iterations stopped converging (64 in the room).
+# sweeps converge to the same light from any (measured: the furnished room, the open scene and the
+# level of bench/real_scenes.py identical to 0.1 % at thresholds 0.1, 0.5 and 1.0 and 1, 2 or 4
+# rays a link), so they are made coarse: threshold 0.5 took the room 3.98 → 2.67 s and the
+# level's links 37.5 → 13.4 s (at 1.0 the links' own iterations stopped converging: 64 in the
+# room); one ray a link instead of 4 the room 2.72 → 2.31 s, the level 34.3 → 25.5 s.
 GATHER_THRESHOLD = 0.5
 # A small scene's elements get more rays than ``gather_rays``, up to this many in all and this many
 # each: the gather's noise (per element, ∝ 1/√rays) is most of its error there and its rays are
 # cheap next to the rest of the bake (measured on the Cornell box, 2 825 elements, against Cycles
 # at 2 048 samples: 256 rays 3.45 % relative RMSE in 0.52 s, 1 024 rays 2.59 % in 1.09 s, the
-# links' own last bounce 3.02 %).
-GATHER_BUDGET = 1 << 22
+# links' own last bounce 3.02 %; the default's 742 rays 2.67 %).
+GATHER_BUDGET = 1 << 21
 GATHER_MOST = 4096
 # The final gather at the elements runs in this many waves on the CPU (each split over the
 # threads), so that uneven work evens out.
@@ -70,13 +71,13 @@ GATHER_WAVES = 16
 
 
 def oracle(settings) -> links_mod.Oracle:
-    """The links this solver asks for: the settings' threshold (at least GATHER_THRESHOLD with
-    ``gather_rays``), rays and budget, weighted by the first estimate of the radiance
-    (``first_radiance``)."""
-    threshold = float(settings.link_threshold)
-    if settings.gather_rays:
-        threshold = max(threshold, GATHER_THRESHOLD)
-    return links_mod.Oracle(threshold=threshold, rays=int(settings.visibility_rays),
+    """The links this solver asks for: the settings' threshold and rays (with ``gather_rays``, at
+    least GATHER_THRESHOLD and one ray, unless texels are gathered over them: ``texel_links``)
+    and budget, weighted by the first estimate of the radiance (``first_radiance``)."""
+    threshold, rays = float(settings.link_threshold), int(settings.visibility_rays)
+    if settings.gather_rays and not settings.texel_links:
+        threshold, rays = max(threshold, GATHER_THRESHOLD), 1
+    return links_mod.Oracle(threshold=threshold, rays=rays,
                             seed=int(settings.seed), budget=int(settings.link_memory) << 20,
                             brightness="first estimate")
 
@@ -305,13 +306,18 @@ def solve(problem) -> Solution:
     rays = gather_rays(problem) if problem.settings.gather_rays else 0
     if rays:
         # the bounces are shared: the gather's sweeps make at least the last one, as the leaf
-        # gather does without them
+        # gather does without them; links that did not converge in theirs are no start (coarse
+        # links carry more or less than the power they get: with albedo 1 in a closed box 9 %
+        # more a bounce, measured), so the sweeps then make all the bounces themselves
         bounces = problem.settings.bounces
         linked, iterations, _, _ = iterate(problem, lambda d, i, o, k: step(d, i, o), bounces - 1)
+        start = linked
+        if iterations >= bounces - 1:
+            start, iterations = None, 0
         hits = problem.stages.run("gather rays", hits_mod.trace, problem, rays)
         sweep = hits_mod.Sweep(problem, hits)
         values, sweeps, _, _ = iterate(problem, lambda d, i, o, k: sweep(i, o), max(1, bounces - iterations),
-                                       start=linked)
+                                       start=start)
         return Solution(values, {"iterations": iterations, "gather_sweeps": sweeps, "links": links.count,
                                  "link_threshold": links.threshold, "gather_rays": rays})
     # the last bounce is made at the elements themselves
