@@ -31,6 +31,7 @@ import numpy as np
 import warp as wp
 
 from .. import device as device_mod
+from ..errors import BakeError
 from .. import hits as hits_mod
 from .. import links as links_mod
 from .. import nearfield
@@ -306,12 +307,14 @@ def solve(problem) -> Solution:
     rays = gather_rays(problem) if problem.settings.gather_rays else 0
     if rays:
         # the bounces are shared: the gather's sweeps make at least the last one, as the leaf
-        # gather does without them; links that did not converge in theirs are no start (coarse
+        # gather does without them; links that did not converge in theirs, or diverged (coarse
         # links carry more or less than the power they get: with albedo 1 in a closed box 9 %
-        # more a bounce, measured), so the sweeps then make all the bounces themselves
+        # more a bounce, measured), are no start, so the sweeps then make all the bounces
         bounces = problem.settings.bounces
-        linked, iterations, _, _ = iterate(problem, lambda d, i, o, k: step(d, i, o), bounces - 1)
-        start = linked
+        try:
+            start, iterations, _, _ = iterate(problem, lambda d, i, o, k: step(d, i, o), bounces - 1)
+        except BakeError:
+            start, iterations = None, bounces
         if iterations >= bounces - 1:
             start, iterations = None, 0
         hits = problem.stages.run("gather rays", hits_mod.trace, problem, rays)

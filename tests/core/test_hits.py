@@ -121,3 +121,4 @@ def test_rays_that_do_not_fit_half_the_link_budget_are_halved_with_a_warning():
     rays = hierarchical.gather_rays(problem)
     assert rays < 4096 and hits.bytes_needed(problem.elements.count, rays) <= 2 ** 19
     assert any("rays per element" in w for w in problem.stages.warnings)
+
