@@ -23,7 +23,7 @@ def test_rays_see_a_parallel_plate_with_its_analytic_form_factor():
     """A floor element under a 1 m square plate 0.4 m above it (facing down, ρ = 0.8, direct
     lighting 2.5 given) receives ρ·D·F at the first bounce, F the point-to-plate form factor:
     four corner rectangles of 0.5 m at height 0.4 m, F = 0.6591. Bound 2 % (256 rays of an R2
-    set)."""
+    set); measured +0.75 %."""
     fp, fn, ft = shapes.grid(3.0, 6)
     pp, pn, pt = shapes.grid(1.0, 4, z=0.4, flip=True)
     scene = shapes.scene([(fp, fn, ft, (0.5,) * 3, (0,) * 3), (pp, pn, pt, (0.8,) * 3, (0,) * 3)])
