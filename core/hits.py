@@ -30,6 +30,7 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
+from .enclosure import PLASTIC
 from .formfactor import tangent_frame
 from .nearfield import Detail
 from .rays import lift
@@ -37,8 +38,6 @@ from .surfels import Surfels
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
-# The R2 sequence's generator (the plastic number): low-discrepancy directions per element.
-PLASTIC = 1.32471795724474602596
 # The near field's traced point nearest to a hit is looked up in a GRID × GRID table over the
 # barycentric square (measured as on an equilateral triangle), not searched among all of them.
 GRID = 32
@@ -68,7 +67,8 @@ def _nearest(table: wp.array(dtype=wp.int32), u: float, v: float) -> int:
 
 
 @wp.func
-def _corners(s: Surfels, corner: wp.array(dtype=wp.int32), f: int) -> wp.vec3i:
+def _corners(corner: wp.array(dtype=wp.int32), f: int) -> wp.vec3i:
+    """The elements at triangle f's corners."""
     return wp.vec3i(corner[3 * f], corner[3 * f + 1], corner[3 * f + 2])
 
 
@@ -105,7 +105,7 @@ def _trace_kernel(offset: int, mesh: wp.uint64, s: Surfels, corner: wp.array(dty
         if q.result and wp.dot(q.normal, d) < 0.0:
             face[row] = q.face
             bary[row] = wp.vec2h(wp.float16(q.u), wp.float16(q.v))
-            c = _corners(s, corner, q.face)
+            c = _corners(corner, q.face)
             light = _mix(direct, c, q.u, q.v)
             if detail:
                 traced = nf.row[q.face]
@@ -128,7 +128,7 @@ def _sweep_kernel(offset: int, h: Hits, s: Surfels, corner: wp.array(dtype=wp.in
         if f >= 0:
             u = float(h.bary[row][0])
             v = float(h.bary[row][1])
-            c = _corners(s, corner, f)
+            c = _corners(corner, f)
             acc += wp.cw_mul(_mix(s.albedo, c, u, v), _mix(indirect, c, u, v))
     out[e] = h.direct[e] + acc / float(h.rays)
 
@@ -144,6 +144,10 @@ def nearest_table(bary: np.ndarray) -> np.ndarray:
     points = np.asarray(bary, np.float64) @ corners
     d = ((cells[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
     return d.argmin(axis=1).astype(np.int32)
+
+
+# Rows of hits a kernel indexes with int32.
+MOST_ROWS = 2 ** 31 - 1
 
 
 def bytes_needed(elements: int, rays: int) -> int:

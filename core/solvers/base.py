@@ -51,8 +51,9 @@ def iterate(problem, sweep, sweeps: int, changes: list | None = None,
     largest change is below ``tolerance`` × the largest lighting value, or ``sweeps`` of them.
     Returns (float32[n,3] the last indirect lighting, sweeps made, the direct lighting and the
     last indirect lighting on the device). ``start`` (float32[n,3]) is the starting point, else
-    an animation's previous frame (``problem.previous``): its light has mostly converged already. ``changes``, when given, gets
-    each sweep's largest change over the largest lighting value (the convergence measure).
+    an animation's previous frame (``problem.previous``): its light has mostly converged already.
+    ``changes``, when given, gets each sweep's largest change over the largest lighting value
+    (the convergence measure).
     Raises BakeError when the sweeps diverge (the change grows past ``GROWTH``, or a value is not
     finite), so that no NaN or infinite lighting is ever written."""
     settings, stages, direct = problem.settings, problem.stages, problem.direct

@@ -19,6 +19,11 @@ Iterations repeat until the largest change is below ``tolerance`` × the largest
 transfer scaled by the sender's centroid form factor from the element over the link's normaliser
 (what a cluster receiving as a whole cannot tell its leaves: nearer, farther, turned away).
 
+By default (``gather_rays``) that last bounce is replaced by a final gather by rays
+(``core.hits``): from the links' solution, sweeps over each element's own rays' hits, until they
+converge. The answer is then what the rays see, and the links only start it, so they are made
+coarse (GATHER_THRESHOLD, one ray each).
+
 At receivers that are not the elements (lightmap texels) ``evaluate`` runs the same final gather
 over the same links at each texel (``texel_gather``), for each element the texel is
 reconstructed from: the elements' own links to leaves exactly, with a ray from the texel to each
@@ -31,10 +36,10 @@ import numpy as np
 import warp as wp
 
 from .. import device as device_mod
-from ..errors import BakeError
 from .. import hits as hits_mod
 from .. import links as links_mod
 from .. import nearfield
+from ..errors import BakeError
 from ..hierarchy import Nodes, node_means
 from ..links import LinkSet, Sampling, leaf_point, sample_leaf, sided_ff
 from ..nearfield import Detail, near_light, varies
@@ -282,13 +287,14 @@ def leaf_gather(problem, links, exitance: np.ndarray) -> np.ndarray:
 def gather_rays(problem) -> int:
     """Rays per element of the final gather: the settings' ``gather_rays``, or more up to
     GATHER_BUDGET rays in all (at most GATHER_MOST each); halved until the hits fit half the
-    ``link_memory`` budget (the links take the rest), with a warning when that happens."""
+    ``link_memory`` budget (the links take the rest) and int32 rows, with a warning when that
+    happens."""
     settings = problem.settings
     n = problem.elements.count
     rays = max(settings.gather_rays, min(GATHER_MOST, GATHER_BUDGET // max(n, 1)))
     budget = settings.link_memory * 2 ** 20 // 2
     fitting = rays
-    while fitting > 1 and hits_mod.bytes_needed(n, fitting) > budget:
+    while fitting > 1 and (hits_mod.bytes_needed(n, fitting) > budget or n * fitting > hits_mod.MOST_ROWS):
         fitting //= 2
     if fitting < rays:
         problem.stages.warn(f"the final gather's {rays} rays per element would take "
