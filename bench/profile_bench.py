@@ -49,8 +49,10 @@ CATEGORIES = {
              "links._total_kernel", "links._cursor_kernel", "links._place_kernel"],
     "link setup": ["links._cone_kernel", "links._max_kernel", "links._first_leaf_kernel",
                    "links._canonical_kernel"],
-    "sweeps": ["hierarchical._gather_kernel", "hierarchical._push_kernel", "hierarchy.", "base."],
+    "sweeps": ["hierarchical._gather_kernel", "hierarchical._push_kernel", "hierarchy.", "base.",
+               "hits._sweep_kernel"],
     "final gather": ["hierarchical._above_kernel", "hierarchical._leaf_gather_kernel"],
+    "gather rays": ["hits._trace_kernel"],
     "direct light": ["direct."],
 }
 SCENES = ("cornell_box", "lamp_scene", "room9k", "room20k", "room100k")
@@ -98,7 +100,7 @@ def profile_scene(name: str, device: str, repeat: int) -> dict:
     row["bake"] = {"seconds": round(time.perf_counter() - t0, 3), "cpu_seconds": round(time.process_time() - c0, 3)}
     c = result.counts
     row["counts"] = {k: c.get(k) for k in ("elements", "links", "link_threshold", "rays", "iterations",
-                                           "leaf_evaluations")}
+                                           "leaf_evaluations", "gather_rays", "gather_sweeps")}
     row["stages"] = {k: round(v, 3) for k, v in result.timings.items()}
     row["kernels"] = table.as_dict()
     cats: dict = {}
