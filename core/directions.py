@@ -115,6 +115,21 @@ def solid_angle(bins: int) -> float:
     return 4.0 * math.pi / bins
 
 
+# The R2 sequence's generator (the plastic number): low-discrepancy points of the unit square.
+PLASTIC = 1.32471795724474602596
+
+
+@wp.func
+def cosine_r2(n: wp.vec3, tu: wp.vec3, tv: wp.vec3, shift: wp.vec2, k: int) -> wp.vec3:
+    """Direction k of a cosine-distributed R2 set about unit n (tangents tu, tv), the set shifted
+    by ``shift`` (in [0, 1)², one per receiver so receivers' sets differ)."""
+    u0 = wp.mod(shift[0] + float(k) / PLASTIC, 1.0)
+    u1 = wp.mod(shift[1] + float(k) / (PLASTIC * PLASTIC), 1.0)
+    r = wp.sqrt(u0)
+    phi = 2.0 * math.pi * u1
+    return tu * (r * wp.cos(phi)) + tv * (r * wp.sin(phi)) + n * wp.sqrt(wp.max(1.0 - u0, 0.0))
+
+
 @wp.func
 def to_world(n: wp.vec3, local: wp.vec3) -> wp.vec3:
     """``frame_dir``'s inverse: a direction given in the frame of unit normal n, in world axes."""

@@ -20,13 +20,11 @@ the globes, got 10× Cycles' light and held 96 % of the scene's squared error).
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .directions import cone_sample_of
+from .directions import cone_sample_of, cosine_r2
 from .formfactor import tangent_frame
 from .rays import lift
 from .scene import LAMP_POINT, LAMP_SPOT, Lamps
@@ -36,8 +34,6 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 # Rays per element: a buried element is told from an open one by all its rays hitting back faces,
 # so a few suffice; partly buried ones (at an intersection line) get their fraction to ±1/RAYS.
 RAYS = 16
-# The R2 sequence's generator (the plastic number), for stratified directions per element.
-PLASTIC = 1.32471795724474602596
 # Rays per lamp, spread evenly over the sphere: one that escapes makes the lamp count as open.
 LAMP_RAYS = 64
 
@@ -54,14 +50,10 @@ def _open_kernel(offset: int, mesh: wp.uint64, pos: wp.array(dtype=wp.vec3), nrm
     origin = lift(pos[e], n, size[e])
     state = wp.rand_init(seed, e)
     shift0 = wp.randf(state)
-    shift1 = wp.randf(state)
+    shift = wp.vec2(shift0, wp.randf(state))
     free = float(0.0)
     for k in range(rays):
-        u0 = wp.mod(shift0 + float(k) / PLASTIC, 1.0)
-        u1 = wp.mod(shift1 + float(k) / (PLASTIC * PLASTIC), 1.0)
-        r = wp.sqrt(u0)
-        phi = 2.0 * math.pi * u1
-        d = tu * (r * wp.cos(phi)) + tv * (r * wp.sin(phi)) + n * wp.sqrt(wp.max(1.0 - u0, 0.0))
+        d = cosine_r2(n, tu, tv, shift, k)
         q = wp.mesh_query_ray(mesh, origin, d, far)
         if not q.result or wp.dot(q.normal, d) < 0.0:
             free += 1.0

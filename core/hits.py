@@ -30,7 +30,7 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .enclosure import PLASTIC
+from .directions import cosine_r2
 from .formfactor import tangent_frame
 from .nearfield import Detail
 from .rays import lift
@@ -91,15 +91,11 @@ def _trace_kernel(offset: int, mesh: wp.uint64, s: Surfels, corner: wp.array(dty
     origin = lift(s.pos[e], n, size[e])
     state = wp.rand_init(seed, e)
     shift0 = wp.randf(state)
-    shift1 = wp.randf(state)
+    shift = wp.vec2(shift0, wp.randf(state))
     detail = nf.row.shape[0] > 0
     acc = wp.vec3(0.0)
     for k in range(rays):
-        u0 = wp.mod(shift0 + float(k) / PLASTIC, 1.0)
-        u1 = wp.mod(shift1 + float(k) / (PLASTIC * PLASTIC), 1.0)
-        r = wp.sqrt(u0)
-        phi = 2.0 * math.pi * u1
-        d = tu * (r * wp.cos(phi)) + tv * (r * wp.sin(phi)) + n * wp.sqrt(wp.max(1.0 - u0, 0.0))
+        d = cosine_r2(n, tu, tv, shift, k)
         q = wp.mesh_query_ray(mesh, origin, d, far)
         row = e * rays + k
         if q.result and wp.dot(q.normal, d) < 0.0:
