@@ -30,7 +30,7 @@ import warp as wp
 
 from . import device as device_mod
 from . import lighttree
-from .formfactor import FAR_REACH, far_triangle_ff, outline_ff, tangent_frame, triangle_ff
+from .formfactor import far_triangle_ff, outline_ff, tangent_frame, triangle_ff, triangle_view
 from .rays import lift, lift_towards, visible
 from .scene import LAMP_AREA, LAMP_SPOT, LAMP_SUN, SceneData
 from .sh import moment_of
@@ -429,13 +429,11 @@ def _triangle_transfer(g: Emitters, e: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
     factor (both faces emit; none where p lies in its plane, ``triangle_ff``), from a quadrature
     where the triangle is far and above p's horizon (``far_triangle_ff``: 3–4× cheaper); none where
     it lies wholly below that horizon."""
-    d = g.em_centre[e] - p
-    reach = g.em_reach[e]
-    up = wp.dot(n, d)
-    if up < -reach:
-        return wp.vec3(0.0)  # wholly below p's horizon
+    view = triangle_view(p, n, g.em_centre[e], g.em_reach[e])
+    if view == -1:
+        return wp.vec3(0.0)
     ff = float(0.0)
-    if up > reach and wp.dot(d, d) > (FAR_REACH * FAR_REACH) * (reach * reach):
+    if view == 1:
         ff = far_triangle_ff(p, n, g.em_v0[e], g.em_v1[e], g.em_v2[e], g.em_centre[e], g.em_normal[e],
                              g.em_area[e])
     else:
