@@ -44,11 +44,11 @@ sys.path.insert(0, str(BENCH))
 # ("module.") summed into each; what matches none is "other kernels".
 CATEGORIES = {
     "oracle (with rays)": ["links._oracle_kernel"],
-    "scan/scatter": ["links.scan", "links._scatter_kernel", "links.concatenate"],
+    "scan/scatter": ["links.scan", "links._scatter_kernel", "links.concatenate", "links.grow"],
     "sort": ["links._directed_kernel", "links.sort", "links._csr_kernel", "links._count_kernel",
              "links._total_kernel", "links._cursor_kernel", "links._place_kernel"],
-    "link setup": ["links._cone_kernel", "links._max_kernel", "links._first_leaf_kernel",
-                   "links._canonical_kernel"],
+    "link setup": ["links._cone_kernel", "links._leaf_plane_kernel", "links._max_kernel",
+                   "links._first_leaf_kernel", "links._canonical_kernel"],
     "sweeps": ["hierarchical._gather_kernel", "hierarchical._push_kernel", "hierarchy.", "base.",
                "hits._sweep_kernel"],
     "final gather": ["hierarchical._above_kernel", "hierarchical._leaf_gather_kernel"],
