@@ -64,7 +64,7 @@ def best(fn, repeat):
     return min(times), out
 
 
-def size_row(size: int, settings: Settings, repeat: int) -> dict:
+def size_row(size: int, settings: Settings, repeat: int, with_bake: bool = True) -> dict:
     scene = room(size)
     problem = Problem(scene, settings)
     problem.tree  # noqa: B018  (made before the timings)
@@ -75,6 +75,9 @@ def size_row(size: int, settings: Settings, repeat: int) -> dict:
            "create": {"seconds": round(seconds, 3), "links": made.count, "rounds": made.rounds,
                       "links_per_second": round(made.count / seconds)}}
     del made, problem
+    if not with_bake:
+        print(row, flush=True)
+        return row
     marks = {}
 
     def progress(stage, fraction):
@@ -106,7 +109,7 @@ def ratios(rows: list) -> list:
         out.append({"elements": [small["elements"], large["elements"]],
                     "size_ratio": round(large["elements"] / small["elements"], 2),
                     **{f"{k}_time_ratio": round(large[k]["seconds"] / small[k]["seconds"], 2)
-                       for k in ("create", "links", "iteration", "bake")}})
+                       for k in ("create", "links", "iteration", "bake") if k in large}})
     return out
 
 
@@ -163,6 +166,9 @@ def main(argv=None) -> int:
     parser.add_argument("--deform-size", type=int, default=100_000)
     parser.add_argument("--frames", type=int, default=5)
     parser.add_argument("--reference-size", type=int, default=20_000, help="0 leaves the reference out")
+    parser.add_argument("--create-only", action="store_true",
+                        help="only link creation per size (no bakes, deforming mesh or reference); "
+                             "writes links-create-<host>.json")
     args = parser.parse_args(argv)
     settings = Settings(method="hierarchical", device=args.device)
     warm = Problem(room(2_000), settings)  # compile the kernels outside the timings
@@ -171,8 +177,12 @@ def main(argv=None) -> int:
               "platform": platform.platform(), "python": sys.version.split()[0], "load_before": load(),
               "anchor": ANCHOR, "settings": {"link_threshold": settings.link_threshold,
                                              "visibility_rays": settings.visibility_rays}}
-    report["sizes"] = [size_row(s, settings, args.repeat) for s in args.sizes]
+    report["sizes"] = [size_row(s, settings, args.repeat, not args.create_only) for s in args.sizes]
     report["ratios"] = ratios(report["sizes"])
+    if args.create_only:
+        report["load_after"] = load()
+        results_file.write("links-create", report)
+        return 0
     if args.deform_size:
         report["deforming"] = deforming(args.deform_size, settings, args.frames)
         print("deforming", report["deforming"], flush=True)

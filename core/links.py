@@ -687,8 +687,9 @@ def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int
         decision[i] = dec
         out_count[i] = count
         link_count[i] = int(dec == LINK)
-        values[i] = out
-        visible_out[i] = wp.vec2(seen[0], seen[1])
+        if dec == LINK:  # what the scatter reads of a link only
+            values[i] = out
+            visible_out[i] = wp.vec2(seen[0], seen[1])
         traced[i] = ray_count
 
 
@@ -892,7 +893,8 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
                           [grain, q, qa, qb, t, problem.surfels, sm, cone, plane, float(threshold), int(weighted),
                            weight, int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919,
                            int(oracle.sides), decision, out_count, link_count, values, seen, rays],
-                          dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check())
+                          dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check(),
+                          uneven=True)
         with device_mod.section("links.scan", dev):
             if oracle.visibility and oracle.rays > 0:
                 traced[0] += int(rays.numpy().sum(dtype=np.int64))
