@@ -5,7 +5,9 @@ Links are made top-down from a queue of candidate node pairs, starting with (roo
 round, one kernel evaluates the *oracle* of every candidate and decides:
 
 - drop: the pair cannot exchange light (one side faces away from the other entirely, bounded by
-  the nodes' normal cones and bounding spheres), or a leaf paired with itself;
+  the nodes' normal cones and bounding spheres; or their surfaces lie in one plane,
+  ``coplanar``, at any depth: a flat wall's clusters with each other and themselves), or a leaf
+  paired with itself;
 - link: the pair's transfer estimate (``pair_need``: each side's size as the other sees it, a
   form factor, and its normal spread as a receiver), times the pair's brightness weight when a
   radiance estimate is given, is below the threshold — unless, while its estimate exceeds
@@ -18,7 +20,8 @@ round, one kernel evaluates the *oracle* of every candidate and decides:
   once). Pairs hold leaves or nodes with several children (``canonical``).
 
 An exclusive scan (``wp.utils.array_scan``) of the decisions' output counts gives the write
-offsets; a second kernel scatters the links and the next queue. This repeats until the queue is
+offsets; a second kernel scatters the links (in place, after the earlier rounds' ones) and the
+next queue. This repeats until the queue is
 empty (about two rounds per tree level). Pairs are unordered — the oracle is symmetric — so each
 link carries both directions.
 

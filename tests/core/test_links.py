@@ -152,6 +152,38 @@ def test_a_budget_below_the_coarsest_links_stops_with_a_message():
         links.build(problem, links.Oracle(threshold=0.1, budget=1000))
 
 
+def test_a_flat_surface_alone_is_dropped_at_first_sight():
+    """Two grids in one plane (the floor as two objects): no point sees another but edge-on, so
+    the root paired with itself is dropped in the first round instead of being split down to
+    pairs of leaves whose exact form factors are all 0."""
+    left = shapes.grid(1.0, 12)
+    right = (left[0] + np.array([1.0, 0.0, 0.0], np.float32), left[1], left[2])
+    problem = Problem(shapes.scene([(*left, (0.5,) * 3, (0,) * 3), (*right, (0.5,) * 3, (0,) * 3)]), CPU)
+    made = links.build(problem, links.Oracle(threshold=0.1, rays=0, visibility=False))
+    assert made.count == 0
+    assert made.rounds == 1
+
+
+def test_surfaces_meeting_at_a_shallow_crease_still_exchange_light():
+    """Two grids folded 2° towards each other along a shared edge are not one plane: their
+    elements see each other, faintly, and every such pair of leaves is covered by one link."""
+    p, n, t = shapes.grid(1.0, 8)
+    angle = np.radians(2.0)
+    fold = p.copy()
+    fold[:, 0] = 0.5 + (p[:, 0] + 0.5) * np.cos(angle)
+    fold[:, 2] = (p[:, 0] + 0.5) * np.sin(angle)
+    tilted = (fold.astype(np.float32), np.tile(np.array([-np.sin(angle), 0, np.cos(angle)], np.float32), (len(p), 1)), t)
+    problem = Problem(shapes.scene([(p, n, t, (0.5,) * 3, (0,) * 3), (*tilted, (0.5,) * 3, (0,) * 3)]), CPU)
+    made = links.build(problem, links.Oracle(threshold=0.1, rays=0, visibility=False))
+    cover = coverage(problem, made)
+    order = problem.tree.order.numpy()
+    part = problem.elements.objects(problem.scene)[order]
+    on_edge = np.abs(problem.elements.position[order, 0] - 0.5) < 1e-5
+    across = (part[:, None] != part[None, :]) & ~(on_edge[:, None] & on_edge[None, :])
+    assert np.all(cover[across] == 1)
+    assert cover.max() == 1
+
+
 def test_links_without_visibility_carry_the_unoccluded_transfer():
     problem = Problem(box_room(8), CPU)
     seen = csr(problem.links(links.Oracle(threshold=0.1, rays=4)))
