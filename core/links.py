@@ -611,15 +611,19 @@ def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int
                    qb: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
                    cone: wp.array(dtype=wp.vec2), plane: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
                    weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
-                   decision: wp.array(dtype=wp.int32), out_count: wp.array(dtype=wp.int32),
-                   link_count: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
-                   visible_out: wp.array(dtype=wp.vec2), traced: wp.array(dtype=wp.int32)):
-    """One candidate pair: its decision, how many pairs it adds to the next queue, whether it is
-    a link, a link's (transfer to a, to b, normaliser to a, to b) and the visible fractions of
-    its transfers; the rays it traced in ``traced[i]`` (Warp's CPU atomics are not atomic across
-    our threads, so no shared counter). Each thread takes ``grain`` consecutive candidates of the
-    ``size`` queued."""
-    first = (wp.tid() + offset) * grain
+                   decision: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
+                   visible_out: wp.array(dtype=wp.vec2), block_next: wp.array(dtype=wp.int32),
+                   block_links: wp.array(dtype=wp.int32), traced: wp.array(dtype=wp.int32)):
+    """Each thread takes a block of ``grain`` consecutive candidate pairs of the ``size`` queued.
+    Per candidate: its decision, and for a link its (transfer to a, to b, normaliser to a, to b)
+    and the visible fractions of its transfers. Per block: the pairs it adds to the next queue,
+    its links and the rays it traced (Warp's CPU atomics are not atomic across our threads, so no
+    shared counter)."""
+    block = wp.tid() + offset
+    first = block * grain
+    adds = int(0)
+    made = int(0)
+    block_rays = int(0)
     for i in range(first, wp.min(first + grain, size)):
         a = qa[i]
         b = qb[i]
@@ -688,54 +692,59 @@ def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int
                             r = children(t, a)
                             count = r[1] - r[0]
         decision[i] = dec
-        out_count[i] = count
-        link_count[i] = int(dec == LINK)
+        adds += count
+        block_rays += ray_count
         if dec == LINK:  # what the scatter reads of a link only
+            made += 1
             values[i] = out
             visible_out[i] = wp.vec2(seen[0], seen[1])
-        traced[i] = ray_count
+    block_next[block] = adds
+    block_links[block] = made
+    traced[block] = block_rays
 
 
 @wp.kernel
-def _scatter_kernel(offset: int, qa: wp.array(dtype=wp.int32), qb: wp.array(dtype=wp.int32), t: Nodes,
-                    decision: wp.array(dtype=wp.int32), out_offset: wp.array(dtype=wp.int32),
-                    link_offset: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
-                    visible_in: wp.array(dtype=wp.vec2), base: int, next_a: wp.array(dtype=wp.int32),
-                    next_b: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
-                    lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
-                    lvisible: wp.array(dtype=wp.vec2)):
-    """Write candidate i's link (after the ``base`` links of earlier rounds), or its pairs of the
-    next queue, at its scanned offsets."""
-    i = wp.tid() + offset
-    a = qa[i]
-    b = qb[i]
-    dec = decision[i]
-    o = out_offset[i]
-    if dec == LINK:
-        j = base + link_offset[i]
-        la[j] = a
-        lb[j] = b
-        lvalues[j] = values[i]
-        lvisible[j] = visible_in[i]
-    elif dec == SPLIT_A:
-        r = children(t, a)
-        for c in range(r[0], r[1]):
-            next_a[o] = canonical(t, c)
-            next_b[o] = b
-            o += 1
-    elif dec == SPLIT_B:
-        r = children(t, b)
-        for c in range(r[0], r[1]):
-            next_a[o] = a
-            next_b[o] = canonical(t, c)
-            o += 1
-    elif dec == SPLIT_SELF:
-        r = children(t, a)
-        for c in range(r[0], r[1]):
-            for c2 in range(c, r[1]):
+def _scatter_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
+                    qb: wp.array(dtype=wp.int32), t: Nodes, decision: wp.array(dtype=wp.int32),
+                    next_offset: wp.array(dtype=wp.int32), link_offset: wp.array(dtype=wp.int32),
+                    values: wp.array(dtype=wp.vec4), visible_in: wp.array(dtype=wp.vec2), base: int,
+                    next_a: wp.array(dtype=wp.int32), next_b: wp.array(dtype=wp.int32),
+                    la: wp.array(dtype=wp.int32), lb: wp.array(dtype=wp.int32),
+                    lvalues: wp.array(dtype=wp.vec4), lvisible: wp.array(dtype=wp.vec2)):
+    """Block k of the oracle's blocks: its candidates' links (after the ``base`` links of earlier
+    rounds) and their pairs of the next queue, in order from the block's scanned offsets."""
+    block = wp.tid() + offset
+    o = next_offset[block]
+    j = base + link_offset[block]
+    for i in range(block * grain, wp.min(block * grain + grain, size)):
+        a = qa[i]
+        b = qb[i]
+        dec = decision[i]
+        if dec == LINK:
+            la[j] = a
+            lb[j] = b
+            lvalues[j] = values[i]
+            lvisible[j] = visible_in[i]
+            j += 1
+        elif dec == SPLIT_A:
+            r = children(t, a)
+            for c in range(r[0], r[1]):
                 next_a[o] = canonical(t, c)
-                next_b[o] = canonical(t, c2)
+                next_b[o] = b
                 o += 1
+        elif dec == SPLIT_B:
+            r = children(t, b)
+            for c in range(r[0], r[1]):
+                next_a[o] = a
+                next_b[o] = canonical(t, c)
+                o += 1
+        elif dec == SPLIT_SELF:
+            r = children(t, a)
+            for c in range(r[0], r[1]):
+                for c2 in range(c, r[1]):
+                    next_a[o] = canonical(t, c)
+                    next_b[o] = canonical(t, c2)
+                    o += 1
 
 
 @wp.kernel
@@ -888,33 +897,33 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         stages.check()
         rounds += 1
         q = qa.size
-        decision, out_count, link_count = (wp.empty(q, dtype=wp.int32, device=d) for _ in range(3))
+        blocks = -(-q // grain)
+        decision = wp.empty(q, dtype=wp.int32, device=d)
         values = wp.empty(q, dtype=wp.vec4, device=d)
         seen = wp.empty(q, dtype=wp.vec2, device=d)
-        rays = wp.empty(q, dtype=wp.int32, device=d)
-        device_mod.launch(_oracle_kernel, -(-q // grain),
+        block_next, block_links, rays, next_offset, link_offset = (
+            wp.empty(blocks, dtype=wp.int32, device=d) for _ in range(5))
+        device_mod.launch(_oracle_kernel, blocks,
                           [grain, q, qa, qb, t, problem.surfels, sm, cone, plane, float(threshold), int(weighted),
                            weight, int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919,
-                           int(oracle.sides), decision, out_count, link_count, values, seen, rays],
+                           int(oracle.sides), decision, values, seen, block_next, block_links, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check(),
                           uneven=True)
         with device_mod.section("links.scan", dev):
             if oracle.visibility and oracle.rays > 0:
                 traced[0] += int(rays.numpy().sum(dtype=np.int64))
-            out_offset = wp.empty(q, dtype=wp.int32, device=d)
-            link_offset = wp.empty(q, dtype=wp.int32, device=d)
-            wp.utils.array_scan(out_count, out_offset, inclusive=False)
-            wp.utils.array_scan(link_count, link_offset, inclusive=False)
-            n_next = _int(out_offset, q - 1) + _int(out_count, q - 1)
-            n_links = _int(link_offset, q - 1) + _int(link_count, q - 1)
+            wp.utils.array_scan(block_next, next_offset, inclusive=False)
+            wp.utils.array_scan(block_links, link_offset, inclusive=False)
+            n_next = _int(next_offset, blocks - 1) + _int(block_next, blocks - 1)
+            n_links = _int(link_offset, blocks - 1) + _int(block_links, blocks - 1)
         if (total + n_links) * BYTES_PER_LINK + (q + n_next) * BYTES_PER_CANDIDATE > oracle.budget:
             return None
         next_a, next_b = (wp.empty(n_next, dtype=wp.int32, device=d) for _ in range(2))
         if found[0].shape[0] < total + n_links:
             with device_mod.section("links.grow", dev):
                 found = _grown(found, total + n_links, total)
-        device_mod.launch(_scatter_kernel, q, [qa, qb, t, decision, out_offset, link_offset, values, seen, total,
-                                               next_a, next_b, *found], dev)
+        device_mod.launch(_scatter_kernel, blocks, [grain, q, qa, qb, t, decision, next_offset, link_offset, values,
+                                                    seen, total, next_a, next_b, *found], dev)
         total += n_links
         qa, qb = next_a, next_b
     return (*(x[:total] for x in found), rounds)
