@@ -70,8 +70,12 @@ def plane_side(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
     distance): there the triangle is seen edge-on and sends nothing to p."""
     nt = wp.cross(b - a, c - a)
     lnt = wp.length(nt)
-    h = wp.dot(p - a, nt)
-    tol = PLANE_EPS * lnt * (wp.length(p - a) + wp.sqrt(lnt))
+    return side_of(wp.dot(p - a, nt), PLANE_EPS * lnt * (wp.length(p - a) + wp.sqrt(lnt)))
+
+
+@wp.func
+def side_of(h: float, tol: float) -> float:
+    """1 for a height h over a plane above tol, −1 below −tol, 0 between (in the plane)."""
     if h > tol:
         return 1.0
     if h < -tol:
@@ -129,34 +133,6 @@ def triangle_view(p: wp.vec3, n: wp.vec3, centre: wp.vec3, reach: float) -> int:
     if up > reach and wp.dot(d, d) > (FAR_REACH * FAR_REACH) * (reach * reach):
         return 1
     return 0
-
-
-@wp.func
-def fan_ff(p: wp.vec3, n: wp.vec3, j: int, side: float, fan_offsets: wp.array(dtype=wp.int32),
-           fan_triangles: wp.array(dtype=wp.int32), tris: wp.array(dtype=wp.int32),
-           points: wp.array(dtype=wp.vec3)) -> float:
-    """Form factor from p to one side of element j's share (a third) of its triangles: the front
-    faces for side 1, the back faces for side −1 (elements.Elements' fan lists); each triangle
-    exact, or from ``far_triangle_ff`` where ``triangle_view`` allows (a leaf pair's fans
-    several triangles apart: 3–4× cheaper)."""
-    s = float(0.0)
-    for k in range(fan_offsets[j], fan_offsets[j + 1]):
-        t = fan_triangles[k]
-        a = points[tris[3 * t]]
-        b = points[tris[3 * t + 1]]
-        c = points[tris[3 * t + 2]]
-        if side * plane_side(p, a, b, c) > 0.0:
-            centre = (a + b + c) / 3.0
-            reach = wp.sqrt(wp.max(wp.length_sq(a - centre), wp.max(wp.length_sq(b - centre),
-                                                                    wp.length_sq(c - centre))))
-            view = triangle_view(p, n, centre, reach)
-            if view == 1:
-                nt = wp.cross(b - a, c - a)
-                lnt = wp.length(nt)
-                s += far_triangle_ff(p, n, a, b, c, centre, nt / lnt, 0.5 * lnt)
-            elif view == 0:
-                s += outline_ff(p, n, OUTLINE_TRIANGLE, 3, a, b, c, 0.0, 0.0)
-    return s / 3.0
 
 
 @wp.func

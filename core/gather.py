@@ -4,7 +4,7 @@ senders' radiance, the light they send (Bunnell's bounce, final gathers).
 Per receiver, the tree is traversed (``core.traversal``) and each sender counts with the transfer
 of its disk: nodes farther than OPEN bounding radii as one cluster disk (``cluster_ff``), nearer
 ones opened (blended ±10 %), leaves closer than √NEAR disk radii with the exact form factors of the
-element's own triangles (``formfactor.fan_ff``), farther leaves with their disk. Senders beyond
+element's own triangles (``surfels.fan_ff``), farther leaves with their disk. Senders beyond
 the AO distance count for nothing (as in Cycles' AO).
 
 Overlapping occluders must not add up. Bunnell's multi-pass fix (ALGORITHMS.md §2: weight each
@@ -32,11 +32,11 @@ import numpy as np
 import warp as wp
 
 from . import device as device_mod
-from .formfactor import cluster_ff, disk_ff, fan_ff
+from .formfactor import cluster_ff, disk_ff
 from .hemisphere import BINS, CELL, bins_vec, frame_of, splat_of
 from .hierarchy import Nodes
 from .sh import GRAZING, moment_of
-from .surfels import Surfels, fan_centre
+from .surfels import Surfels, fan_centre, fan_ff
 from .traversal import cut_advance, cut_begin, cut_skip, cut_weight, opening
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
@@ -76,9 +76,8 @@ def leaf_blend(d2: float, area: float) -> float:
 
 
 @wp.func
-def leaf_transfer(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, a: float, e: int, d2: float,
-                  fan_offsets: wp.array(dtype=wp.int32), fan_triangles: wp.array(dtype=wp.int32),
-                  tris: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3)) -> wp.vec4:
+def leaf_transfer(s: Surfels, p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, a: float, e: int,
+                  d2: float) -> wp.vec4:
     """(front far, back far, front exact, back exact) form factors of a leaf (disk at q, normal nq,
     area a, element e) from p (normal n) at squared distance d2: the disk beyond NEAR, the
     element's own triangles inside, blended over ±10 %."""
@@ -94,8 +93,8 @@ def leaf_transfer(p: wp.vec3, n: wp.vec3, q: wp.vec3, nq: wp.vec3, a: float, e: 
         pe = p
         if wp.dot(nq, n) < 0.0:
             pe = p - n * (CONTACT * wp.sqrt(a))
-        out[2] = (1.0 - blend) * fan_ff(pe, n, e, 1.0, fan_offsets, fan_triangles, tris, points)
-        out[3] = (1.0 - blend) * fan_ff(p, n, e, -1.0, fan_offsets, fan_triangles, tris, points)
+        out[2] = (1.0 - blend) * fan_ff(s, pe, n, e, 1.0)
+        out[3] = (1.0 - blend) * fan_ff(s, p, n, e, -1.0)
     return out
 
 
@@ -197,8 +196,7 @@ def _gather_kernel(offset: int, rp: wp.array(dtype=wp.vec3), rn: wp.array(dtype=
         if child < 0:
             if dist < distance:
                 e = t.element[node]
-                part = w * leaf_transfer(p, n, q, t.normal[node], area, e, d2, s.fan_offsets,
-                                         s.fan_triangles, s.tris, s.points)
+                part = w * leaf_transfer(s, p, n, q, t.normal[node], area, e, d2)
                 # Within about the element's own size the direction to its disk's centre is no
                 # longer where its triangles are (and undefined for a receiver on the element):
                 # towards the centre of its triangles instead, blended in.

@@ -1,7 +1,7 @@
 """A sender's light as a receiver close to it sees it, not its element's average (issue 21).
 
 An element sends one radiance, ρ ⊙ (D + I) with D its point's direct lighting, over its share of
-its triangles (a third of each, ``formfactor.fan_ff``), and is seen or hidden as its point is.
+its triangles (a third of each, ``surfels.fan_ff``), and is seen or hidden as its point is.
 Far away that is what a receiver sees; within about an element's size it is not: the floor under
 an object standing on it passes from sun to shadow inside one element, so the object's underside
 sees mostly the dark part, and a floor vertex hidden under the object hides none of its triangles

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from .formfactor import disk_ff, fan_ff
+from .formfactor import (OUTLINE_TRIANGLE, PLANE_EPS, disk_ff, far_triangle_ff, outline_ff, side_of,
+                         triangle_view)
 from .rays import lift
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
@@ -28,7 +29,10 @@ class Surfels:
     unit); centre: vec3[n] the area-weighted centre of each element's share of its triangles
     (``fan_centre``: where its disk stands as a sender); area: float32[n] (m²); albedo, emission:
     vec3[n]; vertex: int32[n] the vertex each element sits on; fan_offsets: int32[n+1] and
-    fan_triangles: int32[≤3T], each element's triangles (CSR).
+    fan_triangles: int32[≤3T], each element's triangles (CSR); tri_centre: vec4[T] each
+    triangle's centroid (m) and reach (its farthest corner's distance from it, m); tri_normal:
+    vec4[T] its unit normal (along its winding) and size √(2·area) (m) — what ``fan_ff`` would
+    otherwise work out again for every point that looks at a triangle.
     """
 
     mesh: wp.uint64
@@ -43,6 +47,8 @@ class Surfels:
     vertex: wp.array(dtype=wp.int32)
     fan_offsets: wp.array(dtype=wp.int32)
     fan_triangles: wp.array(dtype=wp.int32)
+    tri_centre: wp.array(dtype=wp.vec4)
+    tri_normal: wp.array(dtype=wp.vec4)
 
 
 def upload(elements, mesh: wp.Mesh, device: str) -> Surfels:
@@ -61,6 +67,9 @@ def upload(elements, mesh: wp.Mesh, device: str) -> Surfels:
     s.fan_offsets = wp.array(elements.fan_offsets, dtype=wp.int32, device=device)
     s.fan_triangles = wp.array(elements.fan_triangles, dtype=wp.int32, device=device)
     s.centre = wp.empty(elements.count, dtype=wp.vec3, device=device)
+    triangles = mesh.indices.shape[0] // 3
+    s.tri_centre = wp.empty(triangles, dtype=wp.vec4, device=device)
+    s.tri_normal = wp.empty(triangles, dtype=wp.vec4, device=device)
     _centres(s, device)
     return s
 
@@ -71,10 +80,30 @@ def _centre_kernel(s: Surfels):
     s.centre[e] = fan_centre(e, s.vertex, s.fan_offsets, s.fan_triangles, s.tris, s.points)
 
 
+@wp.kernel
+def _frame_kernel(s: Surfels):
+    t = wp.tid()
+    a = s.points[s.tris[3 * t]]
+    b = s.points[s.tris[3 * t + 1]]
+    c = s.points[s.tris[3 * t + 2]]
+    centre = (a + b + c) / 3.0
+    reach = wp.sqrt(wp.max(wp.length_sq(a - centre), wp.max(wp.length_sq(b - centre), wp.length_sq(c - centre))))
+    nt = wp.cross(b - a, c - a)
+    lnt = wp.length(nt)
+    u = wp.vec3(0.0)
+    if lnt > 0.0:
+        u = nt / lnt
+    s.tri_centre[t] = wp.vec4(centre[0], centre[1], centre[2], reach)
+    s.tri_normal[t] = wp.vec4(u[0], u[1], u[2], wp.sqrt(lnt))
+
+
 def _centres(s: Surfels, device: str) -> None:
-    """Fill ``s.centre`` from the triangles (``fan_centre``)."""
+    """Fill ``s.centre`` from the triangles (``fan_centre``), and each triangle's centre, reach,
+    normal and size."""
     if s.centre.shape[0]:
         wp.launch(_centre_kernel, dim=s.centre.shape[0], inputs=[s], device=device)
+    if s.tri_centre.shape[0]:
+        wp.launch(_frame_kernel, dim=s.tri_centre.shape[0], inputs=[s], device=device)
 
 
 def assign(s: Surfels, elements) -> None:
@@ -134,6 +163,34 @@ def element_ff(s: Surfels, i: int, j: int) -> float:
 
 
 @wp.func
+def fan_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
+    """Form factor from p (unit normal n) to one side of element j's share (a third) of its
+    triangles: the front faces for side 1, the back faces for side −1; a triangle counts where p
+    lies off its plane by more than PLANE_EPS of its size plus their distance (in the plane it is
+    seen edge-on), exactly, or from ``far_triangle_ff`` where ``triangle_view`` allows (a leaf
+    pair's fans several triangles apart: 3–4× cheaper)."""
+    total = float(0.0)
+    for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
+        t = s.fan_triangles[k]
+        cr = s.tri_centre[t]
+        nr = s.tri_normal[t]
+        centre = wp.vec3(cr[0], cr[1], cr[2])
+        normal = wp.vec3(nr[0], nr[1], nr[2])
+        d = p - centre
+        if side * side_of(wp.dot(d, normal), PLANE_EPS * (wp.length(d) + nr[3])) > 0.0:
+            view = triangle_view(p, n, centre, cr[3])
+            if view >= 0:
+                a = s.points[s.tris[3 * t]]
+                b = s.points[s.tris[3 * t + 1]]
+                c = s.points[s.tris[3 * t + 2]]
+                if view == 1:
+                    total += far_triangle_ff(p, n, a, b, c, centre, normal, 0.5 * nr[3] * nr[3])
+                else:
+                    total += outline_ff(p, n, OUTLINE_TRIANGLE, 3, a, b, c, 0.0, 0.0)
+    return total / 3.0
+
+
+@wp.func
 def point_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int) -> float:
     """Form factor from point p (unit normal n) to the front of element j: its disk far away, its
     exact triangles when d² < NEAR·A_j."""
@@ -149,7 +206,7 @@ def face_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
     0.979 instead of 1 (icosphere of 320 faces)."""
     d = s.pos[j] - p
     if wp.dot(d, d) < NEAR * s.area[j]:
-        return fan_ff(p, n, j, side, s.fan_offsets, s.fan_triangles, s.tris, s.points)
+        return fan_ff(s, p, n, j, side)
     return disk_ff(p, n, s.centre[j], s.nrm[j] * side, s.area[j])
 
 
