@@ -196,10 +196,10 @@ class Sampling:
 
 
 @wp.func
-def cos_bound(n: wp.vec3, cone: wp.vec2, u: wp.vec3, beta: wp.vec2) -> float:
+def cos_bound(n: wp.vec3, cone: wp.vec3, u: wp.vec3, beta: wp.vec2) -> float:
     """An upper bound of n'·u' over normals n' within a cone of unit n and directions u' within
     angle β of unit u: the cosine of the angle between n and u less the cone's and β's (1 when
-    that is negative); cone and beta as (cos, sin) of their half-angles, so no trigonometry is
+    that is negative); cone and beta as (cos, sin, …) of their half-angles, so no trigonometry is
     needed."""
     c = cone[0] * beta[0] - cone[1] * beta[1]  # cos and sin of the two half-angles' sum γ
     g = cone[1] * beta[0] + cone[0] * beta[1]
@@ -210,7 +210,7 @@ def cos_bound(n: wp.vec3, cone: wp.vec2, u: wp.vec3, beta: wp.vec2) -> float:
 
 
 @wp.func
-def facing(na: wp.vec3, cone_a: wp.vec2, nb: wp.vec3, cone_b: wp.vec2, u: wp.vec3, spread: float,
+def facing(na: wp.vec3, cone_a: wp.vec3, nb: wp.vec3, cone_b: wp.vec3, u: wp.vec3, spread: float,
            sides: int) -> wp.vec2:
     """(bound of a's cosine, of b's) over their normal cones and the directions from a to b within
     asin(``spread``) of unit u (``cos_bound``), either face with ``sides`` 2."""
@@ -225,11 +225,11 @@ def facing(na: wp.vec3, cone_a: wp.vec2, nb: wp.vec3, cone_b: wp.vec2, u: wp.vec
 
 
 @wp.func
-def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec2, pb: wp.vec3,
-              nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec2, reach: float, sides: int) -> wp.vec3:
+def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec3, pb: wp.vec3,
+              nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec3, reach: float, sides: int) -> wp.vec3:
     """How much nodes a and b — centres p, unit normals n, bounding radii r (m) of their disks,
-    areas (m²), normal cones ((cos, sin) of the half-angle), the sum of the bounding radii of their
-    surfaces (``Nodes.reach``, m) — must be refined to exchange light as wholes: (need of a, need
+    areas (m²), normal cones ((cos, sin, 2 sin(·/2)) of the half-angle), the sum of the bounding
+    radii of their surfaces (``Nodes.reach``, m) — must be refined to exchange light as wholes: (need of a, need
     of b, 1 if they can exchange light at all else 0).
 
     Dropped (0) when the cosines bounded over the cones and the directions between the bounding
@@ -259,8 +259,8 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     g2 = PI * d * d
     g_ab = area_b * cb / (g2 + area_b)  # b seen from a, without a's cosine
     g_ba = area_a * ca / (g2 + area_a)
-    need_a = wp.max(g_ba * cb, g_ab * CONE_WEIGHT * wp.sqrt(2.0 * wp.max(1.0 - cone_a[0], 0.0)))
-    need_b = wp.max(g_ab * ca, g_ba * CONE_WEIGHT * wp.sqrt(2.0 * wp.max(1.0 - cone_b[0], 0.0)))
+    need_a = wp.max(g_ba * cb, g_ab * CONE_WEIGHT * cone_a[2])
+    need_b = wp.max(g_ab * ca, g_ba * CONE_WEIGHT * cone_b[2])
     return wp.vec3(need_a, need_b, 1.0)
 
 
@@ -560,9 +560,9 @@ def _leaf_plane_kernel(offset: int, t: Nodes, s: Surfels, plane: wp.array(dtype=
 
 @wp.kernel
 def _cone_kernel(offset: int, node0: int, t: Nodes, angle: wp.array(dtype=wp.float32),
-                 cone: wp.array(dtype=wp.vec2), plane: wp.array(dtype=wp.vec2)):
+                 cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2)):
     """Half-angle of the cone around each node's normal holding its subtree's normals, from its
-    children's (already set; leaves 0), and its (cos, sin); the (thickness, extent) of its
+    children's (already set; leaves 0), and its (cos, sin, 2 sin(·/2)); the (thickness, extent) of its
     surface around its plane, bounded from its children's (``_leaf_plane_kernel``)."""
     node = node0 + wp.tid() + offset
     n = t.normal[node]
@@ -579,7 +579,8 @@ def _cone_kernel(offset: int, node0: int, t: Nodes, angle: wp.array(dtype=wp.flo
         extent = wp.max(extent, wp.length(x) + pc[1])
     a = wp.min(a, PI)
     angle[node] = a
-    cone[node] = wp.vec2(wp.cos(a), wp.sin(a))
+    ca = wp.cos(a)
+    cone[node] = wp.vec3(ca, wp.sin(a), wp.sqrt(2.0 * wp.max(1.0 - ca, 0.0)))
     plane[node] = wp.vec2(thick, extent)
 
 
@@ -609,7 +610,7 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 @wp.kernel
 def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
                    qb: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
-                   cone: wp.array(dtype=wp.vec2), plane: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
+                   cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
                    weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
                    decision: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
                    visible_out: wp.array(dtype=wp.vec2), block_next: wp.array(dtype=wp.int32),
@@ -789,12 +790,12 @@ def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
 
 
 def cones(tree, surfels: Surfels):
-    """Per node (leaves first, one launch per level): vec2[m] (cos, sin) of its normal-cone
-    half-angle over its subtree (leaves (1, 0)); vec2[m] (thickness, extent) of its surface
+    """Per node (leaves first, one launch per level): vec3[m] (cos, sin, 2 sin(·/2)) of its
+    normal-cone half-angle over its subtree (leaves (1, 0, 0)); vec2[m] (thickness, extent) of its surface
     around its plane (m; see ``coplanar``)."""
     dev = tree.device
     angle = wp.zeros(tree.count, dtype=wp.float32, device=dev.name)
-    cone = wp.full(tree.count, wp.vec2(1.0, 0.0), dtype=wp.vec2, device=dev.name)
+    cone = wp.full(tree.count, wp.vec3(1.0, 0.0, 0.0), dtype=wp.vec3, device=dev.name)
     plane = wp.empty(tree.count, dtype=wp.vec2, device=dev.name)
     offs = tree.level_offsets
     device_mod.launch(_leaf_plane_kernel, int(offs[1]), [tree.nodes, surfels, plane], dev)
