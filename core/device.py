@@ -263,7 +263,7 @@ def _interrupts_held() -> Iterator[None]:
 
 def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
            on_chunk: Optional[Callable[[float], None]] = None, serial: bool = False,
-           uneven: bool = False) -> None:
+           uneven: bool = False, min_split: int = 1) -> None:
     """Launch ``kernel`` over ``n`` threads, ``kernel(offset, *inputs)``.
 
     The range is cut into ``chunks`` consecutive waves (progress and cancellation happen between
@@ -272,6 +272,9 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
     read-modify-writes on the CPU, so a kernel whose threads meet on one value through atomics
     must run its CPU waves on one thread. ``uneven``: the threads' work differs widely (the
     links' oracle), so a CPU wave is cut into PIECES ranges per thread, taken in turn.
+    ``min_split``: a CPU wave with fewer threads than this per core runs on the calling thread
+    alone (handing work to the pool and waiting for it costs ~80 µs, more than a small wave of
+    cheap threads: a link build's first and last rounds).
     """
     if n <= 0:
         return
@@ -284,7 +287,7 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
     pool = _pool(threads - 1) if threads > 1 else None
     for start in range(0, n, step):
         count = min(step, n - start)
-        if pool is None:
+        if pool is None or count < threads * min_split:
             wp.launch(kernel, dim=count, inputs=[start, *inputs], device=device.name)
         else:
             # ranges taken in turn by the pool's threads and this one: with ``uneven``, PIECES per

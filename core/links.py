@@ -106,6 +106,11 @@ TRIAL_MARGIN = 1.5
 # takes a run of candidates (measured: the 10 k room's 948 k candidates, 0.27 → 0.18 CPU s). On a
 # GPU one each.
 GRAIN = 64
+# Threads per core below which a round's launch stays on the calling thread (``device.launch``'s
+# min_split; the pool's ~80 µs exceed a few hundred candidates' work): the oracle's threads
+# (GRAIN candidates, 3–5 µs), the scatter's (GRAIN candidates, ~0.5 µs), a node's cone (~50 ns).
+# (The lamp scene's 17 rounds: link creation 21 → 16 ms.)
+SPLIT_ORACLE, SPLIT_SCATTER, SPLIT_NODES = 32, 256, 2048
 # Nodes whose surfaces lie within this fraction of their extents and distance of one plane are
 # coplanar (``coplanar``), as ``formfactor.PLANE_EPS`` sees a triangle edge-on from a point in its
 # plane: such pairs are dropped at first sight instead of being split down to their leaves, whose
@@ -801,7 +806,7 @@ def cones(tree, surfels: Surfels):
     device_mod.launch(_leaf_plane_kernel, int(offs[1]), [tree.nodes, surfels, plane], dev)
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_cone_kernel, int(offs[lv + 1] - offs[lv]),
-                          [int(offs[lv]), tree.nodes, angle, cone, plane], dev)
+                          [int(offs[lv]), tree.nodes, angle, cone, plane], dev, min_split=SPLIT_NODES)
     return cone, plane
 
 
@@ -909,7 +914,7 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
                            weight, int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919,
                            int(oracle.sides), decision, values, seen, block_next, block_links, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check(),
-                          uneven=True)
+                          uneven=True, min_split=SPLIT_ORACLE)
         with device_mod.section("links.scan", dev):
             if oracle.visibility and oracle.rays > 0:
                 traced[0] += int(rays.numpy().sum(dtype=np.int64))
@@ -924,7 +929,8 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
             with device_mod.section("links.grow", dev):
                 found = _grown(found, total + n_links, total)
         device_mod.launch(_scatter_kernel, blocks, [grain, q, qa, qb, t, decision, next_offset, link_offset, values,
-                                                    seen, total, next_a, next_b, *found], dev)
+                                                    seen, total, next_a, next_b, *found], dev,
+                          min_split=SPLIT_SCATTER)
         total += n_links
         qa, qb = next_a, next_b
     return (*(x[:total] for x in found), rounds)
