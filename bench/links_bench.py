@@ -4,6 +4,7 @@ hierarchical solver against the reference at about 20 k elements.
 
     python bench/links_bench.py [--sizes 20000 200000 1000000] [--device cpu|cuda] [--repeat 3]
                                 [--deform-size 100000] [--frames 5] [--reference-size 20000]
+                                [--create-only]
 
 Scenes (``bench/rooms.py``): a closed furnished room (walls, table, shelves, sofa, cabinet,
 boxes) lit by a ceiling lamp and a window, tessellated to about the asked-for number of elements.
@@ -21,7 +22,9 @@ For each size:
 
 The deforming mesh is the hilly terrain of ``bench/ao_bench.py`` (hills moving each frame) under a
 sun: per frame ``Problem.move`` (BVH and tree refitted) and the links made again from scratch.
-Writes bench/results/links-<hostname>.json with the machine's load before and after.
+Writes bench/results/links-<hostname>.json with the machine's load before and after;
+``--create-only`` measures only ``create`` per size (minutes at a million elements instead of
+an hour) into bench/results/links-create-<hostname>.json.
 """
 from __future__ import annotations
 
