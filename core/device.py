@@ -298,7 +298,8 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
 
             def take():
                 for s in ranges:  # next() on a shared range iterator hands each range out once
-                    wp.launch(kernel, dim=min(sub, start + count - s), inputs=[s, *inputs], device=device.name)
+                    wp.launch(kernel, dim=min(sub, start + count - s), inputs=[s, *inputs],
+                              device=device.name)
 
             with _interrupts_held():
                 futures = [pool.submit(take) for _ in range(threads - 1)]

@@ -21,9 +21,8 @@ round, one kernel evaluates the *oracle* of every candidate and decides:
 
 An exclusive scan (``wp.utils.array_scan``) of the decisions' output counts gives the write
 offsets; a second kernel scatters the links (in place, after the earlier rounds' ones) and the
-next queue. This repeats until the queue is
-empty (about two rounds per tree level). Pairs are unordered — the oracle is symmetric — so each
-link carries both directions.
+next queue. This repeats until the queue is empty (about two rounds per tree level). Pairs are
+unordered — the oracle is symmetric — so each link carries both directions.
 
 A link's transfer both ways is estimated where it is made (``sampled_transfer``): ``rays`` sample
 pairs, one leaf of each node (a leaf node is its own), stratified; per sample the element form
@@ -234,8 +233,8 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
               nb: wp.vec3, rb: float, area_b: float, cone_b: wp.vec3, reach: float, sides: int) -> wp.vec3:
     """How much nodes a and b — centres p, unit normals n, bounding radii r (m) of their disks,
     areas (m²), normal cones ((cos, sin, 2 sin(·/2)) of the half-angle), the sum of the bounding
-    radii of their surfaces (``Nodes.reach``, m) — must be refined to exchange light as wholes: (need of a, need
-    of b, 1 if they can exchange light at all else 0).
+    radii of their surfaces (``Nodes.reach``, m) — must be refined to exchange light as wholes:
+    (need of a, need of b, 1 if they can exchange light at all else 0).
 
     Dropped (0) when the cosines bounded over the cones and the directions between the bounding
     spheres show one side facing away, those of the surfaces as well as the disks (the disks'
@@ -567,8 +566,8 @@ def _leaf_plane_kernel(offset: int, t: Nodes, s: Surfels, plane: wp.array(dtype=
 def _cone_kernel(offset: int, node0: int, t: Nodes, angle: wp.array(dtype=wp.float32),
                  cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2)):
     """Half-angle of the cone around each node's normal holding its subtree's normals, from its
-    children's (already set; leaves 0), and its (cos, sin, 2 sin(·/2)); the (thickness, extent) of its
-    surface around its plane, bounded from its children's (``_leaf_plane_kernel``)."""
+    children's (already set; leaves 0), and its (cos, sin, 2 sin(·/2)); the (thickness, extent)
+    of its surface around its plane, bounded from its children's (``_leaf_plane_kernel``)."""
     node = node0 + wp.tid() + offset
     n = t.normal[node]
     p = t.position[node]
@@ -615,7 +614,8 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
 @wp.kernel
 def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
                    qb: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
-                   cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
+                   cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2), threshold: float,
+                   weighted: int,
                    weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
                    decision: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
                    visible_out: wp.array(dtype=wp.vec2), block_next: wp.array(dtype=wp.int32),
@@ -910,9 +910,10 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         block_next, block_links, rays, next_offset, link_offset = (
             wp.empty(blocks, dtype=wp.int32, device=d) for _ in range(5))
         device_mod.launch(_oracle_kernel, blocks,
-                          [grain, q, qa, qb, t, problem.surfels, sm, cone, plane, float(threshold), int(weighted),
-                           weight, int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919,
-                           int(oracle.sides), decision, values, seen, block_next, block_links, rays],
+                          [grain, q, qa, qb, t, problem.surfels, sm, cone, plane, float(threshold),
+                           int(weighted), weight, int(oracle.rays), int(oracle.visibility),
+                           int(oracle.seed) + 7919, int(oracle.sides), decision, values, seen, block_next,
+                           block_links, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check(),
                           uneven=True, min_split=SPLIT_ORACLE)
         with device_mod.section("links.scan", dev):
@@ -928,9 +929,9 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         if found[0].shape[0] < total + n_links:
             with device_mod.section("links.grow", dev):
                 found = _grown(found, total + n_links, total)
-        device_mod.launch(_scatter_kernel, blocks, [grain, q, qa, qb, t, decision, next_offset, link_offset, values,
-                                                    seen, total, next_a, next_b, *found], dev,
-                          min_split=SPLIT_SCATTER)
+        device_mod.launch(_scatter_kernel, blocks,
+                          [grain, q, qa, qb, t, decision, next_offset, link_offset, values, seen, total,
+                           next_a, next_b, *found], dev, min_split=SPLIT_SCATTER)
         total += n_links
         qa, qb = next_a, next_b
     return (*(x[:total] for x in found), rounds)

@@ -87,7 +87,8 @@ def _frame_kernel(s: Surfels):
     b = s.points[s.tris[3 * t + 1]]
     c = s.points[s.tris[3 * t + 2]]
     centre = (a + b + c) / 3.0
-    reach = wp.sqrt(wp.max(wp.length_sq(a - centre), wp.max(wp.length_sq(b - centre), wp.length_sq(c - centre))))
+    reach = wp.sqrt(wp.max(wp.length_sq(a - centre),
+                           wp.max(wp.length_sq(b - centre), wp.length_sq(c - centre))))
     nt = wp.cross(b - a, c - a)
     lnt = wp.length(nt)
     u = wp.vec3(0.0)
