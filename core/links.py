@@ -71,7 +71,7 @@ DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
 # sort keys and values at twice their count, and the CSR entries (sender, transfer, normaliser,
 # visibility) of both directions.
 BYTES_PER_LINK = 88
-# Bytes per candidate pair in flight: the pair, its decision, counts and values, the next queue.
+# Bytes per candidate pair in flight: the pair, its decision and values, the next queue.
 BYTES_PER_CANDIDATE = 48
 # Bytes of a link in the arrays it is made in (a, b, four values, two visible fractions).
 LINK_ARRAYS_BYTES = 32

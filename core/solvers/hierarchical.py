@@ -60,9 +60,10 @@ LEAF_LIMIT = 1024
 # With the final gather by rays (``core.hits``) the links only give its sweeps their start, and the
 # sweeps converge to the same light from any (measured on bench/real_scenes.py's scenes: the same
 # error against the truth to 0.01 percentage points, the furnished room and the open scene at
-# thresholds 0.1, 0.5 and 1.0, all three at 1, 2 or 4 rays a link), so they are made coarse: threshold 0.5 took the room 3.98 → 2.67 s and the
-# level's links 37.5 → 13.4 s (at 1.0 the links' own iterations stopped converging: 64 in the
-# room); one ray a link instead of 4 the room 2.72 → 2.31 s, the level 34.3 → 25.5 s.
+# thresholds 0.1, 0.5 and 1.0, all three at 1, 2 or 4 rays a link), so they are made coarse:
+# threshold 0.5 took the room 3.98 → 2.67 s and the level's links 37.5 → 13.4 s (at 1.0 the
+# links' own iterations stopped converging: 64 in the room); one ray a link instead of 4 the room
+# 2.72 → 2.31 s, the level 34.3 → 25.5 s.
 GATHER_THRESHOLD = 0.5
 # A small scene's elements get more rays than ``gather_rays``, up to this many in all and this many
 # each: the gather's noise (per element, ∝ 1/√rays) is most of its error there and its rays are
@@ -320,7 +321,7 @@ def solve(problem) -> Solution:
         try:
             start, iterations, _, _ = iterate(problem, lambda d, i, o, k: step(d, i, o), bounces - 1)
         except BakeError:
-            start, iterations = None, bounces
+            start, iterations = None, 0
         if iterations >= bounces - 1:
             start, iterations = None, 0
         hits = problem.stages.run("gather rays", hits_mod.trace, problem, rays)
