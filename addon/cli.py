@@ -15,9 +15,12 @@ import argparse
 import json
 import os
 import platform
+import signal
 import sys
+import threading
 import time
 import traceback
+from contextlib import contextmanager
 from dataclasses import fields
 from pathlib import Path
 
@@ -192,7 +195,7 @@ def _bake(args) -> int:
             print(f"{PROG}: warning: {message}", file=sys.stderr, flush=True)
 
     job = BakeJob(settings, args.objects, progress=_Progress(), notify=warn)
-    with Staging() as staging:
+    with _ctrl_c_stops(job), Staging() as staging:
         for message in job.run_sync(bpy.context):
             warn(message)
         if "save" in outputs:
@@ -209,11 +212,36 @@ def _bake(args) -> int:
             report = _report(job, settings, str(blend), {k: str(v) for k, v in outputs.items()})
             with staging.writing(outputs["report"]) as temp:
                 _write_verified(temp, (json.dumps(report, indent=2) + "\n").encode())
+        if job.stopping:  # Ctrl-C after the bake's last check: still nothing is written
+            raise BakeCancelled("bake cancelled")
         staging.commit()
     result = job.result
     print(f"{PROG}: baked {result.counts.get('elements', 0)} elements on {result.device} "
           f"in {job.seconds:.2f} s")
     return 0
+
+
+@contextmanager
+def _ctrl_c_stops(job: BakeJob):
+    """The first Ctrl-C (SIGINT) asks ``job`` to stop at its next check, which raises
+    BakeCancelled; a second one interrupts at once. A KeyboardInterrupt raised wherever the main
+    thread happens to be can land in a finaliser (a Warp array's ``__del__``), where Python prints
+    and drops it, and the bake then ran to its end and exited 0 (seen in CI). Where SIGINT is not
+    Python's default handler (Blender's own, under ``blender -c``), nothing changes."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+
+    def stop(signum, frame):
+        job.stop_soon()
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    signal.signal(signal.SIGINT, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _check_distinct(blend: Path, outputs: dict) -> None:

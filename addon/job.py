@@ -127,10 +127,20 @@ class BakeJob:
         done = idle and (self.error is not None or self._cancel.is_set() or not self.frames_left)
         return stage, fraction, done
 
+    def stop_soon(self) -> None:
+        """Ask the bake to stop at its next check, and nothing else: safe from a signal handler
+        that interrupts this job's own code. ``run_sync``/``finish`` then raise BakeCancelled."""
+        self._cancel.set()
+
+    @property
+    def stopping(self) -> bool:
+        """Whether the bake was asked to stop."""
+        return self._cancel.is_set()
+
     def cancel(self) -> None:
         """Ask the bake to stop at its next check; ``finish()`` then raises BakeCancelled (and
         removes what was staged; so does this call when no frame is baking)."""
-        self._cancel.set()
+        self.stop_soon()
         if self._thread is None or not self._thread.is_alive():
             self._discard()
 

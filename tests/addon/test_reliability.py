@@ -524,6 +524,26 @@ def test_ctrl_c_of_a_real_process(tmp_path):
     assert "Traceback" not in err and not out.exists() and list(tmp_path.iterdir()) == []
 
 
+def test_a_first_ctrl_c_asks_the_bake_to_stop_and_a_second_interrupts():
+    # the first only sets the job's flag, so it cannot be lost in a finaliser (where Python drops
+    # a KeyboardInterrupt); the bake's next check raises BakeCancelled
+    class Job:
+        def __init__(self):
+            self.asked = 0
+
+        def stop_soon(self):
+            self.asked += 1
+
+    job = Job()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    with pytest.raises(KeyboardInterrupt):
+        with cli._ctrl_c_stops(job):
+            signal.raise_signal(signal.SIGINT)
+            assert job.asked == 1
+            signal.raise_signal(signal.SIGINT)
+    assert job.asked == 1 and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_an_internal_error_shows_its_traceback_and_one_line(blend, capsys, bake_raises):
     bake_raises(ValueError("a bug"))
     run = bake(capsys, blend, *FAST)
