@@ -8,6 +8,8 @@ furnished room of ``bench/real_scenes.py``). A final gather by rays sees what ea
 sees: ``trace`` sends RAYS cosine-distributed rays from every element (an R2 set shifted per
 element) and keeps where each first meets a front face (triangle and barycentric coordinates;
 misses, back faces and mesh lights' own light send nothing here: the direct light holds them).
+The same rays tell each element's open fraction (``enclosure``: the share of them whose first hit is
+a front face or nothing), which the links weigh their samples by: the solver traces them first.
 The light an element then receives is the mean radiance at those points,
 
     I_e = 1/K Σ_k ρ(h_k) ⊙ (D(h_k) + Σ_c b_c(h_k) I_c)
@@ -50,11 +52,13 @@ class Hits:
     """K rays per element, element e's at rows e·K … e·K + K − 1. face: int32[n·K] the front
     face first hit (−1: none, or a back face); bary: vec2h[n·K] its barycentric weights of the
     triangle's corners 0 and 1 (corner 2 gets the rest); direct: vec3[n] the mean over the rays of
-    ρ ⊙ D at the hits (irradiance/π), which the sweeps do not change; rays: K."""
+    ρ ⊙ D at the hits (irradiance/π), which the sweeps do not change; free: float32[n] the share
+    of the rays whose first hit is a front face or nothing (``enclosure.open_fraction``); rays: K."""
 
     face: wp.array(dtype=wp.int32)
     bary: wp.array(dtype=wp.vec2h)
     direct: wp.array(dtype=wp.vec3)
+    free: wp.array(dtype=wp.float32)
     rays: int
 
 
@@ -83,8 +87,9 @@ def _trace_kernel(offset: int, mesh: wp.uint64, s: Surfels, corner: wp.array(dty
                   table: wp.array(dtype=wp.int32),
                   direct: wp.array(dtype=wp.vec3), size: wp.array(dtype=wp.float32), rays: int, far: float,
                   seed: int, face: wp.array(dtype=wp.int32), bary: wp.array(dtype=wp.vec2h),
-                  out: wp.array(dtype=wp.vec3)):
-    """Element e: its rays' hits, and their mean ρ ⊙ D into out[e]."""
+                  out: wp.array(dtype=wp.vec3), free: wp.array(dtype=wp.float32)):
+    """Element e: its rays' hits, their mean ρ ⊙ D into out[e] and the share of them that met a
+    front face or nothing into free[e]."""
     e = wp.tid() + offset
     n = s.nrm[e]
     tu, tv = tangent_frame(n)
@@ -94,6 +99,7 @@ def _trace_kernel(offset: int, mesh: wp.uint64, s: Surfels, corner: wp.array(dty
     shift = wp.vec2(shift0, wp.randf(state))
     detail = nf.row.shape[0] > 0
     acc = wp.vec3(0.0)
+    back = int(0)
     for k in range(rays):
         d = cosine_r2(n, tu, tv, shift, k)
         q = wp.mesh_query_ray(mesh, origin, d, far)
@@ -110,7 +116,10 @@ def _trace_kernel(offset: int, mesh: wp.uint64, s: Surfels, corner: wp.array(dty
             acc += wp.cw_mul(_mix(s.albedo, c, q.u, q.v), light)
         else:
             face[row] = -1
+            if q.result:
+                back += 1
     out[e] = acc / float(rays)
+    free[e] = float(rays - back) / float(rays)
 
 
 @wp.kernel
@@ -154,7 +163,7 @@ def bytes_needed(elements: int, rays: int) -> int:
 def trace(problem, rays: int) -> Hits:
     """The ``Hits`` of ``rays`` cosine-distributed rays from each element of ``problem`` (rays
     counted in ``problem.counts``), the near field's traced direct light (``problem.near``) at
-    the hits where it varies."""
+    the hits where it varies, and the open fraction they tell (``Hits.free``)."""
     dev, s, els = problem.device, problem.surfels, problem.elements
     d = dev.name
     n = els.count
@@ -163,6 +172,7 @@ def trace(problem, rays: int) -> Hits:
     h.face = wp.empty(n * rays, dtype=wp.int32, device=d)
     h.bary = wp.empty(n * rays, dtype=wp.vec2h, device=d)
     h.direct = wp.empty(n, dtype=wp.vec3, device=d)
+    h.free = wp.empty(n, dtype=wp.float32, device=d)
     corner = wp.array(np.ascontiguousarray(els.corner.reshape(-1), np.int32), dtype=wp.int32, device=d)
     sizes = wp.array(problem.element_sizes.astype(np.float32), dtype=wp.float32, device=d)
     direct = wp.array(problem.direct, dtype=wp.vec3, device=d)
@@ -170,7 +180,7 @@ def trace(problem, rays: int) -> Hits:
     table = wp.array(nearest_table(nf.bary.numpy()), dtype=wp.int32, device=d)
     device_mod.launch(_trace_kernel, n, [problem.mesh.id, s, corner, nf, table, direct, sizes, h.rays,
                                          float(problem.far), int(problem.settings.seed) + 104729, h.face,
-                                         h.bary, h.direct], dev)
+                                         h.bary, h.direct, h.free], dev)
     problem.counts["rays"] += n * rays
     return h
 

@@ -181,7 +181,8 @@ class Problem:
     @cached_property
     def open_fraction(self) -> wp.array:
         """float32[n] on the device: the share of each element's view not shut inside a closed
-        surface (``enclosure.open_fraction``), traced once."""
+        surface (``enclosure.open_fraction``), traced once — or set by a solver whose rays tell
+        it (the hierarchical solver's final gather, ``hits.Hits.free``)."""
         from . import enclosure
 
         return wp.array(self.stages.run("enclosure", enclosure.open_fraction, self), dtype=wp.float32,

@@ -309,9 +309,14 @@ def solve(problem) -> Solution:
     the largest change is below ``tolerance`` × the largest lighting value, or ``bounces``; then,
     with ``gather_rays``, sweeps over each element's rays' hits (``core.hits``) from there, until
     they converge as well."""
+    rays = gather_rays(problem) if problem.settings.gather_rays else 0
+    if rays:
+        # traced before the links: its rays tell the open fraction the links weigh their samples
+        # by, which ``enclosure`` would otherwise trace rays of its own for
+        hits = problem.stages.run("gather rays", hits_mod.trace, problem, rays)
+        problem.open_fraction = hits.free
     links = links_of(problem)
     step = Iteration(problem, links)
-    rays = gather_rays(problem) if problem.settings.gather_rays else 0
     if rays:
         # the bounces are shared: the gather's sweeps make at least the last one, as the leaf
         # gather does without them; links that did not converge in theirs, or diverged (coarse
@@ -324,7 +329,6 @@ def solve(problem) -> Solution:
             start, iterations = None, 0
         if iterations >= bounces - 1:
             start, iterations = None, 0
-        hits = problem.stages.run("gather rays", hits_mod.trace, problem, rays)
         sweep = hits_mod.Sweep(problem, hits)
         values, sweeps, _, _ = iterate(problem, lambda d, i, o, k: sweep(i, o), max(1, bounces - iterations),
                                        start=start)

@@ -4,7 +4,7 @@ surface light nothing, even where a surface touches it."""
 import numpy as np
 
 import shapes
-from radiosity_baker.core import Settings, bake
+from radiosity_baker.core import Settings, bake, solvers
 from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.scene import LAMP_POINT, Lamps
 
@@ -34,6 +34,20 @@ def test_only_elements_inside_a_closed_surface_have_their_view_shut():
     problem = Problem(sunk_cube_scene(), Settings(method="hierarchical", device="cpu"))
     buried, clear = _floor_parts(problem)
     assert buried.sum() == 4
+    shut = problem.open_fraction.numpy()
+    np.testing.assert_array_equal(shut[buried], 0.0)
+    np.testing.assert_array_equal(shut[clear], 1.0)
+
+
+def test_the_final_gathers_rays_tell_the_open_fraction_without_rays_of_their_own():
+    """The hierarchical solver traces its final gather before its links: the share of those rays
+    meeting a front face or nothing is the open fraction, and ``enclosure`` traces none."""
+    scene = sunk_cube_scene()
+    settings = Settings(method="hierarchical", device="cpu")
+    assert "enclosure" not in bake(scene, settings).timings
+    problem = Problem(scene, settings)
+    solvers.get("hierarchical").solve(problem)
+    buried, clear = _floor_parts(problem)
     shut = problem.open_fraction.numpy()
     np.testing.assert_array_equal(shut[buried], 0.0)
     np.testing.assert_array_equal(shut[clear], 1.0)
