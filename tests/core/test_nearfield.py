@@ -4,6 +4,7 @@ import numpy as np
 
 import shapes
 from radiosity_baker.core import Settings
+from radiosity_baker.core import direct, nearfield
 from radiosity_baker.core.problem import Problem
 from radiosity_baker.core.scene import LAMP_SUN
 from radiosity_baker.core.solvers import hierarchical
@@ -52,3 +53,24 @@ def test_receiver_over_a_shadow_edge_sees_the_shadowed_part_of_the_floor_element
     exitance = (els.albedo * problem.direct).astype(np.float32)
     averaged = hierarchical.leaf_gather(problem, hierarchical.links_of(problem), exitance)[on, 0]
     assert averaged.mean() > 2.0 * expected.mean()
+
+
+def test_each_near_field_point_traces_an_eighth_of_the_light_samples(monkeypatch):
+    """A hit of the final gather reads its nearest traced point alone, whose noise nothing averages:
+    each point gets light_samples / POINT_SHARE samples (8 at 64; a 32nd before, 2 samples, was
+    most of the level's error)."""
+    problem = Problem(shadow_edge_scene(), Settings(method="hierarchical", device="cpu", light_samples=64))
+    assert problem.direct is not None
+    counts = []
+    estimate = direct.estimate
+
+    def spy(problem, points, normals, sizes, mode, count, seed, **kw):
+        counts.append((len(points), count))
+        return estimate(problem, points, normals, sizes, mode, count, seed, **kw)
+
+    monkeypatch.setattr(direct, "estimate", spy)
+    assert problem.near is not None
+    traced = problem.counts["near_triangles_traced"]
+    assert traced > 0
+    assert counts == [(traced * nearfield.PER_TRIANGLE, 64 // nearfield.POINT_SHARE)]
+    assert nearfield.POINT_SHARE == 8
