@@ -10,7 +10,7 @@ the squared error against Cycles on the capsule's lowest 5 cm, which no finer li
 moved).
 
 So every triangle gets direct light traced at fixed points (PER_TRIANGLE each, an R2 set of barycentric coordinates; ``core.direct``,
-each with a share of the light samples, POINT_SHARE) where its corners' direct light differs. A final
+each with a share of the light samples, POINT_SHARE or POINT_SHARE_EXACT) where its corners' direct light differs. A final
 gather at point p (the hierarchical solver's at elements and texels, the reference's last sweep)
 then takes an element with such triangles within √FAR of its sizes as its triangles' points: each weighted by the kernel cos θ cos θ' / r² from p, with its own direct light, and where
 it weighs more than SEEN of the whole, its own ray from p (elsewhere the link's visible fraction):
@@ -37,12 +37,16 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 # direct light at the capsule's vertices 1–3 cm up: ~11 per triangle +29 %, ~42 +7 %; 32 and 64
 # gave the same total error, 0.85 %, in an earlier variant).
 PER_TRIANGLE = 32
-# Each point traces this share of ``light_samples`` (8 at the default 64). A hit of the final gather
-# reads its nearest point alone, so a point's noise is not averaged with its neighbours': at 1/32
-# (2 samples a point) it was most of the level's error (bench/real_scenes.py, 116 k elements, many
-# emitters under the light tree; against Cycles at 1 024 samples, 128 gather rays): relative RMSE
-# 10.76 % in 14.4 s; 1/16 9.65 % (+0.2 s), 1/8 9.06 % (+0.7 s), 1/4 8.99 % (+1.7 s), 1/2 8.96 %.
+# Each point traces this share of ``light_samples`` where the light tree chooses the emitters (8
+# at the default 64): a hit of the final gather reads its nearest point alone, so a point's noise is
+# not averaged with its neighbours', and the tree's choice of emitters adds to it. At 1/32 (2
+# samples a point) it was most of the level's error (bench/real_scenes.py, 116 k elements, 8 845
+# emitters; against Cycles at 1 024 samples, 128 gather rays): relative RMSE 10.76 % in 14.4 s;
+# 1/16 9.65 % (+0.2 s), 1/8 9.06 % (+0.7 s), 1/4 8.99 % (+1.7 s), 1/2 8.96 %. Where every emitter
+# is weighed exactly only the shadows are sampled, and 1/32 holds: 1/8 cost the furnished room
+# (two lamps) 0.24 s of 1.4 s for no less error (2.54 → 2.57 %).
 POINT_SHARE = 8
+POINT_SHARE_EXACT = PER_TRIANGLE
 # A receiver at squared distance d² from an element's centre sees it integrated over its
 # triangles below NEAR × its area, as its element average beyond FAR × its area (blended between).
 NEAR = 4.0
@@ -220,9 +224,10 @@ def build(problem) -> Detail:
         normals = np.einsum("pk,mkc->mpc", bary, np.asarray(scene.corner_normals, np.float32)[tris]).reshape(-1, 3)
         sizes = np.repeat(np.sqrt(scene.triangle_areas()[tris] / PER_TRIANGLE), PER_TRIANGLE).astype(np.float32)
         settings = problem.settings
+        share = POINT_SHARE_EXACT if direct_mod.exact_selection(problem, len(points)) else POINT_SHARE
         traced, rays, _, _ = direct_mod.estimate(
             problem, points, normals, sizes, np.full(len(points), direct_mod.MODE_FULL, np.int32),
-            max(1, math.ceil(settings.light_samples / POINT_SHARE)), settings.seed + 7919)
+            max(1, math.ceil(settings.light_samples / share)), settings.seed + 7919)
         problem.counts["rays"] += int(rays.sum())
         light = traced.reshape(-1, PER_TRIANGLE, 3)
     problem.counts["near_triangles_traced"] = int(len(tris))

@@ -1,6 +1,7 @@
 """The near field of the hierarchical solver (issue 21): a receiver close to a sender sees the
 sender's direct light where it looks, not the sender element's average."""
 import numpy as np
+import pytest
 
 import shapes
 from radiosity_baker.core import Settings
@@ -55,11 +56,15 @@ def test_receiver_over_a_shadow_edge_sees_the_shadowed_part_of_the_floor_element
     assert averaged.mean() > 2.0 * expected.mean()
 
 
-def test_each_near_field_point_traces_an_eighth_of_the_light_samples(monkeypatch):
+@pytest.mark.parametrize("selection, share", [("tree", 8), ("exact", 32)])
+def test_near_field_points_trace_an_eighth_of_the_light_samples_where_the_light_tree_chooses(
+        monkeypatch, selection, share):
     """A hit of the final gather reads its nearest traced point alone, whose noise nothing averages:
-    each point gets light_samples / POINT_SHARE samples (8 at 64; a 32nd before, 2 samples, was
-    most of the level's error)."""
-    problem = Problem(shadow_edge_scene(), Settings(method="hierarchical", device="cpu", light_samples=64))
+    where the light tree chooses the emitters each point gets an eighth of the light samples (8 at
+    64; a 32nd, 2 samples, was most of the level's error), where every emitter is weighed exactly
+    a 32nd (only the shadows are sampled)."""
+    problem = Problem(shadow_edge_scene(), Settings(method="hierarchical", device="cpu", light_samples=64,
+                                                    light_selection=selection))
     assert problem.direct is not None
     counts = []
     estimate = direct.estimate
@@ -72,5 +77,4 @@ def test_each_near_field_point_traces_an_eighth_of_the_light_samples(monkeypatch
     assert problem.near is not None
     traced = problem.counts["near_triangles_traced"]
     assert traced > 0
-    assert counts == [(traced * nearfield.PER_TRIANGLE, 64 // nearfield.POINT_SHARE)]
-    assert nearfield.POINT_SHARE == 8
+    assert counts == [(traced * nearfield.PER_TRIANGLE, 64 // share)]
