@@ -164,10 +164,11 @@ class Settings:
                                     "made at 0.5 at least, unless Texel Links gathers texels over "
                                     "them)",
                                     "solver", low=1e-5, high=1.0, digits=4)
-    # 128: on the level of bench/real_scenes.py (116 k elements; one run against Cycles at 1 024
-    # samples, 2-core VM) 256 rays gave 10.45 % relative RMSE in 18.9 s (4.7x Cycles at equal
-    # error), 128 10.76 % in 13.8 s (6.2x), 64 11.29 % in 11.4 s (6.8x): past ~100 rays its error
-    # is the direct light's noise, not the gather's. Small scenes get more (GATHER_BUDGET).
+    # 128: on the level of bench/real_scenes.py (116 k elements; against Cycles at 1 024 samples,
+    # 2-core VM; bench/results/accuracy-level-gather-vm-2026-12-04.*) 256 rays gave 10.45 %
+    # relative RMSE in 18.6 s (4.9x Cycles at equal error), 128 10.76 % in 13.8 s (6.3x), 64
+    # 11.29 % in 11.4 s (6.8x, a separate bake): past ~100 rays its error is the direct light's
+    # noise, not the gather's. Small scenes get more (GATHER_BUDGET).
     gather_rays: int = _option(128, "Gather Rays", "rays from each element for the final "
                                "gather (hierarchical): what each element sees, bounced until it "
                                "converges, in place of the links' cluster averages; more is "
