@@ -263,7 +263,7 @@ def _interrupts_held() -> Iterator[None]:
 
 def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
            on_chunk: Optional[Callable[[float], None]] = None, serial: bool = False,
-           uneven: bool = False, min_split: int = 1) -> None:
+           uneven: bool = False, min_split: int = 1, one_by_one: bool = False) -> None:
     """Launch ``kernel`` over ``n`` threads, ``kernel(offset, *inputs)``.
 
     The range is cut into ``chunks`` consecutive waves (progress and cancellation happen between
@@ -274,7 +274,8 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
     links' oracle), so a CPU wave is cut into PIECES ranges per thread, taken in turn.
     ``min_split``: a CPU wave with fewer threads than this per core runs on the calling thread
     alone (handing work to the pool and waiting for it costs ~80 µs, more than a small wave of
-    cheap threads: a link build's first and last rounds).
+    cheap threads: a link build's first and last rounds). ``one_by_one``: each thread is a range
+    of its own, taken in turn (few, long threads of unknown length: the links' depth-first runs).
     """
     if n <= 0:
         return
@@ -293,6 +294,8 @@ def launch(kernel, n: int, inputs: list, device: Device, chunks: int = 1,
             # ranges taken in turn by the pool's threads and this one: with ``uneven``, PIECES per
             # thread, so a thread that drew cheap ones takes more of them
             pieces = threads * PIECES if uneven and count >= threads * PIECES * MIN_PIECE else threads
+            if one_by_one:
+                pieces = count
             sub = -(-count // pieces)
             ranges = iter(range(start, start + count, sub))
 

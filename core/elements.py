@@ -94,8 +94,10 @@ class Elements:
     adjacent triangles' area. albedo, emission: float32[n,3], area-weighted means over adjacent
     triangles (emission in radiance units). vertex: int32[n] the mesh vertex each sits on.
     fan_offsets: int32[n+1] and fan_triangles: int32[3T] list, per element, the triangles it is a
-    corner of (CSR), for exact near-field form factors. corner: int32[T,3] the element of each
-    triangle corner.
+    corner of (CSR), for exact near-field form factors; fan_outline: int32[3T,3] per entry of that
+    list, its triangle's edge opposite the element and how it joins the fan (``fan_outline``).
+    corner: int32[T,3] the element of each triangle
+    corner.
     """
 
     position: np.ndarray
@@ -106,6 +108,7 @@ class Elements:
     vertex: np.ndarray
     fan_offsets: np.ndarray
     fan_triangles: np.ndarray
+    fan_outline: np.ndarray
     corner: np.ndarray
 
     @property
@@ -115,6 +118,38 @@ class Elements:
     def objects(self, scene: SceneData) -> np.ndarray:
         """int32[n]: the object (index into ``scene.object_names``) of each element."""
         return scene.tri_object[self.fan_triangles[self.fan_offsets[:-1]]]
+
+
+# Flags of a fan entry (``fan_outline``): its triangle's first spoke (from the element's vertex to
+# the next corner) is open, its second (from the corner after that back to the vertex) is open,
+# the fan repeats a spoke (its outline is no simple sum).
+FAN_OPEN_OUT, FAN_OPEN_IN, FAN_TANGLED = 1, 2, 4
+
+
+def fan_outline(triangles: np.ndarray, corners: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """int32[3T,3]: per fan entry (``order``: the triangle corners, 3·t + c, in fan order;
+    ``corners``: int[3T] the element of each corner; ``triangles``: int[T,3] mesh vertices), the
+    mesh vertices of its triangle's edge opposite the element (the corners after the element's,
+    in winding order) and its flags: FAN_OPEN_OUT / FAN_OPEN_IN where the triangle's spoke from
+    (to) the element's vertex is shared with no other triangle of the fan (in the opposite
+    direction), FAN_TANGLED on every entry of a fan that repeats a spoke in one direction (not a
+    manifold fan).
+
+    Summed over a fan, the contour integrals of its triangles' edges cancel along shared spokes,
+    so a point that sees every triangle of a fan from one side, unclipped, sees the fan as those
+    edges plus its open spokes (``surfels.outline_fan_ff``)."""
+    t, c = order // 3, order % 3
+    e = corners[order].astype(np.int64)
+    after, then = triangles[t, (c + 1) % 3], triangles[t, (c + 2) % 3]
+    stride = int(triangles.max()) + 1 if triangles.size else 1
+    out_key, in_key = e * stride + after, e * stride + then
+    flags = FAN_OPEN_OUT * ~np.isin(out_key, in_key) + FAN_OPEN_IN * ~np.isin(in_key, out_key)
+    tangled = np.zeros(int(e.max()) + 1 if e.size else 0, bool)
+    for key in (out_key, in_key):
+        uniq, uses = np.unique(key, return_counts=True)
+        tangled[uniq[uses > 1] // stride] = True
+    flags[tangled[e]] |= FAN_TANGLED
+    return np.stack([after, then, flags], axis=1).astype(np.int32)
 
 
 def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:
@@ -170,5 +205,6 @@ def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:
         vertex=shading.vertex,
         fan_offsets=fan_offsets,
         fan_triangles=fan_triangles,
+        fan_outline=fan_outline(scene.triangles, corners, order),
         corner=tris,
     )

@@ -21,8 +21,13 @@ round, one kernel evaluates the *oracle* of every candidate and decides:
 
 An exclusive scan (``wp.utils.array_scan``) of the decisions' output counts gives the write
 offsets; a second kernel scatters the links (in place, after the earlier rounds' ones) and the
-next queue. This repeats until the queue is empty (about two rounds per tree level). Pairs are
-unordered — the oracle is symmetric — so each link carries both directions.
+next queue. On a GPU this repeats until the queue is empty (about two rounds per tree level). On
+the CPU, whose few threads need no rounds to keep busy, the build turns depth first once a round's
+queue holds DEPTH_FIRST pairs: the queue is cut into runs, each thread takes runs in turn, and a
+run walks the pairs below its own with a stack, writing its links straight into its own region
+of the link arrays (``_depth_first``): the same oracle (``_decide``) and the same links, without
+the rounds' candidate arrays, scans and launches. Pairs are unordered — the oracle is symmetric —
+so each link carries both directions.
 
 A link's transfer both ways is estimated where it is made (``sampled_transfer``): ``rays`` sample
 pairs, one leaf of each node (a leaf node is its own), stratified; per sample the element form
@@ -65,6 +70,15 @@ from .formfactor import cluster_ff, disk_ff
 from .hierarchy import Nodes
 from .rays import lift, visible
 from .surfels import Surfels, face_ff, fan_sample, pair_hits, ray_ends
+
+# No gradients (halves compile time). On the CPU, LLVM inlines more than Warp's defaults (9000,
+# 3000): the oracle kernel inlines the form factors at a dozen call sites, and a call left out of
+# line copies the kernel's structs (a kilobyte each) by value. At the defaults, a larger
+# ``surfels.fan_ff`` made link creation 1.6× slower, dropped pairs included (room20k: 121 →
+# 191 ms); these thresholds give the fully inlined speed.
+wp.set_module_options({"enable_backward": False, "cpu_compiler_flags": (
+    "-march=native -mllvm=-inline-threshold=40000 -mllvm=-inline-cold-callsite-threshold=20000"
+    " -mllvm=-slp-recursion-max-depth=4")})
 
 DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
 # Peak bytes per link (both directions): the pair and its five values while it is made, then two
@@ -110,6 +124,13 @@ GRAIN = 64
 # (GRAIN candidates, 3–5 µs), the scatter's (GRAIN candidates, ~0.5 µs), a node's cone (~50 ns).
 # (The lamp scene's 17 rounds: link creation 21 → 16 ms.)
 SPLIT_ORACLE, SPLIT_SCATTER, SPLIT_NODES = 32, 256, 2048
+# On the CPU, once a breadth-first round's queue holds DEPTH_FIRST candidates, the rest of the
+# build goes depth first (``_depth_first``), in DEPTH_RUNS runs taken in turn by the threads (so a
+# core that drew light runs takes more), each run's links into its own region of at least
+# MIN_REGION links where the room allows; with rays (minutes on large scenes) in DEPTH_WAVES
+# waves, between which a bake can be cancelled. Neither count depends on the number of threads,
+# so neither do the links' order and the sums over them.
+DEPTH_FIRST, DEPTH_RUNS, MIN_REGION, DEPTH_WAVES = 256, 64, 4096, 8
 # Nodes whose surfaces lie within this fraction of their extents and distance of one plane are
 # coplanar (``coplanar``), as ``formfactor.PLANE_EPS`` sees a triangle edge-on from a point in its
 # plane: such pairs are dropped at first sight instead of being split down to their leaves, whose
@@ -167,8 +188,8 @@ class LinkSet:
 class Links:
     """Links over ``problem.tree``: ``set`` (``LinkSet`` on the device), ``pairs`` unordered links
     (``count`` = 2 × pairs directed ones), the ``threshold`` used (raised from the oracle's when
-    the budget asked for it), ``rounds`` of the build, ``rays_traced``, ``seconds`` the build took
-    (creation with its transfers and visibility, and the sort into CSR)."""
+    the budget asked for it), the build's breadth-first ``rounds``, ``rays_traced``, ``seconds``
+    the build took (creation with its transfers and visibility, and the sort into CSR)."""
 
     set: LinkSet
     pairs: int
@@ -251,11 +272,12 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     gap = d - ra - rb
     if gap <= 0.0:
         return wp.vec3(1.0, 1.0, 1.0)
-    u = v / d
-    cosines = facing(na, cone_a, nb, cone_b, u, (ra + rb) / d, sides)
+    inv = 1.0 / d
+    u = v * inv
+    cosines = facing(na, cone_a, nb, cone_b, u, (ra + rb) * inv, sides)
     if cosines[0] <= 0.0 or cosines[1] <= 0.0:
         # the disks face away; the surfaces around them may not
-        cosines = facing(na, cone_a, nb, cone_b, u, reach / d, sides)
+        cosines = facing(na, cone_a, nb, cone_b, u, reach * inv, sides)
         if cosines[0] <= 0.0 or cosines[1] <= 0.0:
             return wp.vec3(0.0, 0.0, 0.0)
     ca = cosines[0]
@@ -279,6 +301,10 @@ def coplanar(t: Nodes, plane: wp.array(dtype=wp.vec2), a: int, b: int) -> bool:
     if a == b:
         return pa[0] <= FLAT * pa[1]
     d = t.position[b] - t.position[a]
+    # most pairs have a side thicker than the tolerance: tell them without its square root
+    over = wp.max(pa[0], pb[0]) - FLAT * (pa[1] + pb[1])
+    if over > 0.0 and over * over > (FLAT * FLAT) * wp.dot(d, d):
+        return False
     na = t.normal[a]
     nb = t.normal[b]
     tilt = wp.length(na - nb)
@@ -611,6 +637,107 @@ def _canonical_kernel(offset: int, t: Nodes, node: int, out: wp.array(dtype=wp.i
     out[0] = canonical(t, node)
 
 
+@wp.func(inline=True)  # one copy per kernel: out of line, the structs would be copied per call
+def _decide(t: Nodes, s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2),
+            a: int, b: int, threshold: float, weighted: int, weight: wp.array(dtype=wp.float32), rays: int,
+            visibility: int, seed: int, sides: int):
+    """The oracle on candidate pair (a, b) (see the module docstring): (decision, pairs its split
+    adds, for a link its (transfer to a, to b, normaliser to a, to b), its visible fractions
+    (to a, to b, plain), rays traced)."""
+    dec = DROP
+    count = int(0)
+    out = wp.vec4(0.0)
+    seen = wp.vec3(1.0)
+    ray_count = int(0)
+    leaf_a = t.descend[a] < 0
+    leaf_b = t.descend[b] < 0
+    if t.area[a] > 0.0 and t.area[b] > 0.0 and (sides == 2 or not coplanar(t, plane, a, b)):
+        if a == b:
+            if not leaf_a:
+                r = children(t, a)
+                k = r[1] - r[0]
+                dec = SPLIT_SELF
+                count = k * (k + 1) // 2
+        elif leaf_a and leaf_b:
+            ea = t.element[a]
+            eb = t.element[b]
+            f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
+            f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
+            if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
+                dec = LINK
+                v = float(1.0)
+                if visibility != 0 and rays > 0:
+                    v = float(pair_hits(s, ray_ends(ea, eb, f_ab, f_ba), rays, seed)) / float(rays)
+                    ray_count = rays
+                out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
+                seen = wp.vec3(v, v, v)
+        else:
+            need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
+                             t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b],
+                             t.reach[a] + t.reach[b], sides)
+            if need[2] > 0.0:
+                w = float(1.0)
+                if weighted != 0:
+                    w = wp.max(weight[a], weight[b])
+                need_a = need[0] * w
+                need_b = need[1] * w
+                largest = wp.max(need_a, need_b)
+                split = largest > threshold
+                if not split:
+                    if rays > 0:
+                        probe = largest > PARTIAL * threshold
+                        out, seen, ray_count = sampled_transfer(t, s, sm, a, b, rays, visibility, seed,
+                                                                sides, probe)
+                        # partly visible, or no sample saw a form factor: the samples know
+                        # too little of the pair to link it or drop it
+                        split = probe and ((seen[2] > 0.0 and seen[2] < 1.0)
+                                           or (visibility != 0 and not (out[2] > 0.0)
+                                               and not (out[3] > 0.0)))
+                    else:
+                        f_ab = centre_ff(t, s, a, b, sides)
+                        f_ba = centre_ff(t, s, b, a, sides)
+                        out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
+                    if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
+                        dec = LINK
+                if split:
+                    if leaf_a or (not leaf_b and need_b >= need_a):
+                        dec = SPLIT_B
+                        r = children(t, b)
+                        count = r[1] - r[0]
+                    else:
+                        dec = SPLIT_A
+                        r = children(t, a)
+                        count = r[1] - r[0]
+    return dec, count, out, seen, ray_count
+
+
+@wp.func
+def _put_split(t: Nodes, dec: int, a: int, b: int, out_a: wp.array(dtype=wp.int32),
+               out_b: wp.array(dtype=wp.int32), o: int) -> int:
+    """The pairs a split of (a, b) (decision ``dec``) makes, written to out_a, out_b from o on;
+    returns where the next goes."""
+    if dec == SPLIT_A:
+        r = children(t, a)
+        for c in range(r[0], r[1]):
+            out_a[o] = canonical(t, c)
+            out_b[o] = b
+            o += 1
+    elif dec == SPLIT_B:
+        r = children(t, b)
+        for c in range(r[0], r[1]):
+            out_a[o] = a
+            out_b[o] = canonical(t, c)
+            o += 1
+    elif dec == SPLIT_SELF:
+        r = children(t, a)
+        for c in range(r[0], r[1]):
+            for c2 in range(c, r[1]):
+                out_a[o] = canonical(t, c)
+                out_b[o] = canonical(t, c2)
+                o += 1
+    return o
+
+
 @wp.kernel
 def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
                    qb: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
@@ -620,83 +747,19 @@ def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int
                    decision: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
                    visible_out: wp.array(dtype=wp.vec2), block_next: wp.array(dtype=wp.int32),
                    block_links: wp.array(dtype=wp.int32), traced: wp.array(dtype=wp.int32)):
-    """Each thread takes a block of ``grain`` consecutive candidate pairs of the ``size`` queued.
-    Per candidate: its decision, and for a link its (transfer to a, to b, normaliser to a, to b)
-    and the visible fractions of its transfers. Per block: the pairs it adds to the next queue,
-    its links and the rays it traced (Warp's CPU atomics are not atomic across our threads, so no
-    shared counter)."""
+    """A breadth-first round: each thread takes a block of ``grain`` consecutive candidate pairs of
+    the ``size`` queued. Per candidate: its decision (``_decide``), and for a link its (transfer to
+    a, to b, normaliser to a, to b) and the visible fractions of its transfers. Per block: the
+    pairs it adds to the next queue, its links and the rays it traced (Warp's CPU atomics are not
+    atomic across our threads, so no shared counter)."""
     block = wp.tid() + offset
     first = block * grain
     adds = int(0)
     made = int(0)
     block_rays = int(0)
     for i in range(first, wp.min(first + grain, size)):
-        a = qa[i]
-        b = qb[i]
-        dec = DROP
-        count = int(0)
-        out = wp.vec4(0.0)
-        seen = wp.vec3(1.0)
-        ray_count = int(0)
-        leaf_a = t.descend[a] < 0
-        leaf_b = t.descend[b] < 0
-        if t.area[a] > 0.0 and t.area[b] > 0.0 and (sides == 2 or not coplanar(t, plane, a, b)):
-            if a == b:
-                if not leaf_a:
-                    r = children(t, a)
-                    k = r[1] - r[0]
-                    dec = SPLIT_SELF
-                    count = k * (k + 1) // 2
-            elif leaf_a and leaf_b:
-                ea = t.element[a]
-                eb = t.element[b]
-                f_ab = sided_element_ff(s, s.pos[ea], s.nrm[ea], eb, sides)
-                f_ba = sided_element_ff(s, s.pos[eb], s.nrm[eb], ea, sides)
-                if f_ab > 0.0 or f_ba > 0.0 or sides == 2:
-                    dec = LINK
-                    v = float(1.0)
-                    if visibility != 0 and rays > 0:
-                        v = float(pair_hits(s, ray_ends(ea, eb, f_ab, f_ba), rays, seed)) / float(rays)
-                        ray_count = rays
-                    out = wp.vec4(f_ab * v, f_ba * v, f_ab, f_ba)
-                    seen = wp.vec3(v, v, v)
-            else:
-                need = pair_need(t.position[a], t.normal[a], t.radius[a], t.area[a], cone[a],
-                                 t.position[b], t.normal[b], t.radius[b], t.area[b], cone[b],
-                                 t.reach[a] + t.reach[b], sides)
-                if need[2] > 0.0:
-                    w = float(1.0)
-                    if weighted != 0:
-                        w = wp.max(weight[a], weight[b])
-                    need_a = need[0] * w
-                    need_b = need[1] * w
-                    largest = wp.max(need_a, need_b)
-                    split = largest > threshold
-                    if not split:
-                        if rays > 0:
-                            probe = largest > PARTIAL * threshold
-                            out, seen, ray_count = sampled_transfer(t, s, sm, a, b, rays, visibility, seed,
-                                                                    sides, probe)
-                            # partly visible, or no sample saw a form factor: the samples know
-                            # too little of the pair to link it or drop it
-                            split = probe and ((seen[2] > 0.0 and seen[2] < 1.0)
-                                               or (visibility != 0 and not (out[2] > 0.0)
-                                                   and not (out[3] > 0.0)))
-                        else:
-                            f_ab = centre_ff(t, s, a, b, sides)
-                            f_ba = centre_ff(t, s, b, a, sides)
-                            out = wp.vec4(f_ab, f_ba, f_ab, f_ba)
-                        if not split and (out[0] > 0.0 or out[1] > 0.0 or sides == 2):
-                            dec = LINK
-                    if split:
-                        if leaf_a or (not leaf_b and need_b >= need_a):
-                            dec = SPLIT_B
-                            r = children(t, b)
-                            count = r[1] - r[0]
-                        else:
-                            dec = SPLIT_A
-                            r = children(t, a)
-                            count = r[1] - r[0]
+        dec, count, out, seen, ray_count = _decide(t, s, sm, cone, plane, qa[i], qb[i], threshold, weighted,
+                                                   weight, rays, visibility, seed, sides)
         decision[i] = dec
         adds += count
         block_rays += ray_count
@@ -723,34 +786,80 @@ def _scatter_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.in
     o = next_offset[block]
     j = base + link_offset[block]
     for i in range(block * grain, wp.min(block * grain + grain, size)):
-        a = qa[i]
-        b = qb[i]
         dec = decision[i]
         if dec == LINK:
-            la[j] = a
-            lb[j] = b
+            la[j] = qa[i]
+            lb[j] = qb[i]
             lvalues[j] = values[i]
             lvisible[j] = visible_in[i]
             j += 1
-        elif dec == SPLIT_A:
-            r = children(t, a)
-            for c in range(r[0], r[1]):
-                next_a[o] = canonical(t, c)
-                next_b[o] = b
-                o += 1
-        elif dec == SPLIT_B:
-            r = children(t, b)
-            for c in range(r[0], r[1]):
-                next_a[o] = a
-                next_b[o] = canonical(t, c)
-                o += 1
-        elif dec == SPLIT_SELF:
-            r = children(t, a)
-            for c in range(r[0], r[1]):
-                for c2 in range(c, r[1]):
-                    next_a[o] = canonical(t, c)
-                    next_b[o] = canonical(t, c2)
-                    o += 1
+        else:
+            o = _put_split(t, dec, qa[i], qb[i], next_a, next_b, o)
+
+
+# What a depth-first run (``_depth_first_kernel``) ends with: all its seeds done, its region of the
+# link arrays full, its stack full (a bound that cannot be reached; see ``_depth_first``).
+DONE, FULL, DEEP = 0, 1, 2
+
+
+@wp.kernel
+def _depth_first_kernel(offset: int, runs: wp.array(dtype=wp.int32), seeds_a: wp.array(dtype=wp.int32),
+                        seeds_b: wp.array(dtype=wp.int32), seed_next: wp.array(dtype=wp.int32),
+                        seed_end: wp.array(dtype=wp.int32), stack_a: wp.array(dtype=wp.int32),
+                        stack_b: wp.array(dtype=wp.int32), stack_top: wp.array(dtype=wp.int32),
+                        stack_cap: int, region: wp.array(dtype=wp.vec2i), status: wp.array(dtype=wp.int32),
+                        t: Nodes, s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec3),
+                        plane: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
+                        weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
+                        traced: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
+                        lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
+                        lvisible: wp.array(dtype=wp.vec2)):
+    """Run ``runs[k]``: the links below its seeds (seed_next … seed_end − 1 of seeds_a, seeds_b),
+    made depth first from its own stack (stack_cap pairs from run × stack_cap; stack_top pairs on
+    it) into its own region [start, end) of the link arrays, with no candidate arrays, scans or
+    rounds between. Stops when done, or when its region is full (the pair it could not place back
+    on its stack: a later launch goes on with a new region). region[run] becomes the part it
+    filled; seed_next, stack_top and traced (rays, added) are kept for that launch."""
+    run = runs[wp.tid() + offset]
+    base = run * stack_cap
+    top = stack_top[run]
+    next_seed = seed_next[run]
+    j = region[run][0]
+    end = region[run][1]
+    state = DONE
+    run_rays = int(0)
+    while top > 0 or next_seed < seed_end[run]:
+        if top == 0:
+            stack_a[base] = seeds_a[next_seed]
+            stack_b[base] = seeds_b[next_seed]
+            next_seed += 1
+            top = 1
+        top -= 1
+        a = stack_a[base + top]
+        b = stack_b[base + top]
+        if j == end:  # no room for a link of this pair: a later launch takes it from here
+            top += 1
+            state = FULL
+            break
+        dec, count, out, seen, ray_count = _decide(t, s, sm, cone, plane, a, b, threshold, weighted, weight,
+                                                   rays, visibility, seed, sides)
+        run_rays += ray_count
+        if dec == LINK:
+            la[j] = a
+            lb[j] = b
+            lvalues[j] = out
+            lvisible[j] = wp.vec2(seen[0], seen[1])
+            j += 1
+        elif dec != DROP:
+            if top + count > stack_cap:
+                state = DEEP
+                break
+            top = _put_split(t, dec, a, b, stack_a, stack_b, base + top) - base
+    region[run] = wp.vec2i(region[run][0], j)
+    stack_top[run] = top
+    seed_next[run] = next_seed
+    status[run] = state
+    traced[run] += run_rays
 
 
 @wp.kernel
@@ -883,9 +992,13 @@ def _canonical_root(tree) -> int:
 
 
 def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, traced: list):
-    """One top-down build at ``threshold``: the unordered links (int32 a, b, vec4 values, vec2
-    visible fractions: device arrays) and the rounds taken, or None when the budget was exceeded
-    on the way. ``traced[0]`` counts the rays traced."""
+    """One top-down build at ``threshold``: the link arrays (int32 a, b, vec4 values, vec2 visible
+    fractions: device arrays), the segments [start, end) of them that hold links, in order, and
+    the breadth-first rounds taken; or None when the budget was exceeded on the way. ``traced[0]``
+    counts the rays traced.
+
+    Breadth first, a round per level of pairs; on the CPU, once a round's queue holds
+    DEPTH_FIRST candidates, the rest depth first from them (``_depth_first``)."""
     tree, dev, stages = problem.tree, problem.device, problem.stages
     d = dev.name
     t = tree.nodes
@@ -893,6 +1006,8 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     weighted = weight is not None
     if weight is None:
         weight = wp.zeros(1, dtype=wp.float32, device=d)
+    decide = [t, problem.surfels, sm, cone, plane, float(threshold), int(weighted), weight, int(oracle.rays),
+              int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides)]
     root = _canonical_root(tree)
     grain = 1 if dev.is_cuda else GRAIN
     qa = wp.full(1, root, dtype=wp.int32, device=d)
@@ -901,6 +1016,9 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     total, rounds = 0, 0
     while qa.size > 0:
         stages.check()
+        if not dev.is_cuda and qa.size >= DEPTH_FIRST:
+            made = _depth_first(problem, oracle, decide, qa, qb, found, total, traced)
+            return None if made is None else (*made, rounds)
         rounds += 1
         q = qa.size
         blocks = -(-q // grain)
@@ -910,10 +1028,7 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         block_next, block_links, rays, next_offset, link_offset = (
             wp.empty(blocks, dtype=wp.int32, device=d) for _ in range(5))
         device_mod.launch(_oracle_kernel, blocks,
-                          [grain, q, qa, qb, t, problem.surfels, sm, cone, plane, float(threshold),
-                           int(weighted), weight, int(oracle.rays), int(oracle.visibility),
-                           int(oracle.seed) + 7919, int(oracle.sides), decision, values, seen, block_next,
-                           block_links, rays],
+                          [grain, q, qa, qb, *decide, decision, values, seen, block_next, block_links, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check(),
                           uneven=True, min_split=SPLIT_ORACLE)
         with device_mod.section("links.scan", dev):
@@ -934,7 +1049,95 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
                            next_a, next_b, *found], dev, min_split=SPLIT_SCATTER)
         total += n_links
         qa, qb = next_a, next_b
-    return (*(x[:total] for x in found), rounds)
+    return found, [(0, total)], rounds
+
+
+def _depth_first(problem, oracle: Oracle, decide: list, qa: wp.array, qb: wp.array, found: list,
+                 total: int, traced: list):
+    """The links below the queued pairs qa, qb (int32[q]) on the CPU, depth first
+    (``_depth_first_kernel``): the queue cut into DEPTH_RUNS runs, taken in turn by the threads;
+    each run writes its links to its own region of ``found`` (after the ``total`` made so far), an
+    equal share of the room the budget leaves. A run whose region fills up goes on in a
+    later launch, in the largest room then left. Returns ``found`` and the segments [start, end)
+    of it that hold links, in order (deterministic: every run's links, and the regions they go
+    to, follow from the queue alone), or None when the links do not fit the budget.
+
+    Per candidate this saves the breadth-first rounds' candidate arrays, scans and scatter, and
+    each round's launches (on room20k: 116 → NN ms; see README)."""
+    tree, dev, stages = problem.tree, problem.device, problem.stages
+    d = dev.name
+    q = qa.size
+    n_runs = min(q, DEPTH_RUNS)
+    bounds = (np.arange(n_runs + 1, dtype=np.int64) * q) // n_runs
+    seed_next = wp.array(bounds[:-1].astype(np.int32), dtype=wp.int32, device=d)
+    seed_end = wp.array(bounds[1:].astype(np.int32), dtype=wp.int32, device=d)
+    cap = _stack_cap(tree)
+    stack_a, stack_b = (wp.empty(n_runs * cap, dtype=wp.int32, device=d) for _ in range(2))
+    stack_top, status, rays = (wp.zeros(n_runs, dtype=wp.int32, device=d) for _ in range(3))
+    region = wp.zeros(n_runs, dtype=wp.vec2i, device=d)
+    room = [(total, min(found[0].shape[0], oracle.budget // BYTES_PER_LINK))]  # free [start, end)
+    parts = [[] for _ in range(n_runs)]  # per run, the segments it filled, in order
+    pending = np.arange(n_runs, dtype=np.int32)
+    while pending.size:
+        stages.check()
+        regions = _regions(room, pending.size)
+        if regions is None:
+            return None
+        runs, waiting = pending[:len(regions)], pending[len(regions):]
+        region.numpy()[runs] = regions
+        device_mod.launch(_depth_first_kernel, runs.size,
+                          [wp.array(runs, dtype=wp.int32, device=d), qa, qb, seed_next, seed_end, stack_a,
+                           stack_b, stack_top, cap, region, status, *decide, rays, *found],
+                          dev, chunks=1 if oracle.rays == 0 else DEPTH_WAVES,
+                          on_chunk=lambda f: stages.check(), one_by_one=True)
+        state = status.numpy()[runs]
+        if (state == DEEP).any():
+            raise RuntimeError("links: a depth-first run outgrew its stack (a bug: the bound is exact)")
+        filled = region.numpy()[runs]
+        for run, (start, end), (_, used) in zip(runs, regions, filled):
+            parts[run].append((int(start), int(used)))
+            if used < end:
+                room.append((int(used), int(end)))
+        pending = np.concatenate([runs[state == FULL], waiting])
+    if oracle.visibility and oracle.rays > 0:
+        traced[0] += int(rays.numpy().sum(dtype=np.int64))
+    segments = [(0, total)] + [seg for run in parts for seg in run]
+    return found, [(a, b) for a, b in segments if b > a]
+
+
+def _regions(room: list, count: int) -> np.ndarray | None:
+    """int32[k,2]: regions [start, end) of the link arrays for the first k ≤ ``count`` waiting runs,
+    taken from ``room`` (free [start, end) pieces, updated): equal shares of the largest piece
+    where each gets MIN_REGION links or the other pieces are smaller than a share, else the
+    largest pieces, one each; None when no room is left."""
+    room[:] = sorted((r for r in room if r[1] > r[0]), key=lambda r: r[1] - r[0], reverse=True)
+    if not room:
+        return None
+    start, end = room[0]
+    share = (end - start) // count
+    next_piece = room[count - 1][1] - room[count - 1][0] if len(room) >= count else 0
+    if share >= MIN_REGION or (share >= 1 and next_piece < share):
+        room.pop(0)
+        cuts = start + share * np.arange(count + 1, dtype=np.int64)
+        cuts[-1] = end
+        return np.stack([cuts[:-1], cuts[1:]], axis=1).astype(np.int32)
+    taken, room[:] = room[:count], room[count:]
+    return np.array(taken, dtype=np.int32)
+
+
+def _stack_cap(tree) -> int:
+    """Pairs a depth-first run's stack can hold at most: each split (one side one level down)
+    leaves at most the most pairs a split makes less one on it, over at most twice the tree's
+    levels of splits, plus the seed."""
+    nodes = tree.nodes
+    descend = nodes.descend.numpy()
+    inner = descend >= 0
+    if not inner.any():
+        return 2
+    c0 = descend[inner]
+    k = nodes.child_end.numpy()[nodes.parent.numpy()[c0]] - c0
+    most = int(max(k.max() * (k.max() + 1) // 2, 1))
+    return 2 * tree.levels * (most - 1) + 2
 
 
 def _link_buffers(problem, oracle: Oracle) -> list:
@@ -959,14 +1162,35 @@ def _grown(arrays: list, need: int, keep: int) -> list:
     return grown
 
 
+@wp.func
+def _segment_of(seg_rank: wp.array(dtype=wp.int32), r: int) -> int:
+    """The segment holding the link of rank r: the last k with seg_rank[k] ≤ r."""
+    lo = int(0)
+    hi = seg_rank.shape[0] - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if seg_rank[mid] <= r:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
 @wp.kernel
-def _count_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
+def _count_kernel(offset: int, run: int, pairs: int, m: int, seg_start: wp.array(dtype=wp.int32),
+                  seg_rank: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
                   lb: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)):
-    """Run t (links t·run … t·run + run − 1): how many of its directed links each node receives,
-    in row t of counts (int32[runs·m], no other thread writes it)."""
+    """Run t (the links of rank t·run … t·run + run − 1, in the segments seg_start of the link
+    arrays, seg_rank the ranks they start at): how many of its directed links each node
+    receives, in row t of counts (int32[runs·m], no other thread writes it)."""
     t = wp.tid() + offset
     row = t * m
-    for i in range(t * run, wp.min(t * run + run, pairs)):
+    r0 = t * run
+    g = _segment_of(seg_rank, r0)
+    for r in range(r0, wp.min(r0 + run, pairs)):
+        while r >= seg_rank[g + 1]:
+            g += 1
+        i = seg_start[g] + r - seg_rank[g]
         counts[row + la[i]] += 1
         counts[row + lb[i]] += 1
 
@@ -996,14 +1220,21 @@ def _cursor_kernel(offset: int, runs: int, m: int, offsets: wp.array(dtype=wp.in
 
 
 @wp.kernel
-def _place_kernel(offset: int, run: int, pairs: int, m: int, la: wp.array(dtype=wp.int32),
+def _place_kernel(offset: int, run: int, pairs: int, m: int, seg_start: wp.array(dtype=wp.int32),
+                  seg_rank: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
                   lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
                   lvisible: wp.array(dtype=wp.vec2), cursor: wp.array(dtype=wp.int32), out: LinkSet):
-    """Run t's directed links, in order, at their receivers' next places (``cursor``: row t of
-    ``_cursor_kernel``'s places, advanced as they fill): sender, transfer, normaliser, visible."""
+    """Run t's directed links (as ``_count_kernel``), in order, at their receivers' next places
+    (``cursor``: row t of ``_cursor_kernel``'s places, advanced as they fill): sender, transfer,
+    normaliser, visible."""
     t = wp.tid() + offset
     row = t * m
-    for i in range(t * run, wp.min(t * run + run, pairs)):
+    r0 = t * run
+    g = _segment_of(seg_rank, r0)
+    for r in range(r0, wp.min(r0 + run, pairs)):
+        while r >= seg_rank[g + 1]:
+            g += 1
+        i = seg_start[g] + r - seg_rank[g]
         a = la[i]
         b = lb[i]
         x = lvalues[i]
@@ -1024,17 +1255,19 @@ def _place(out: LinkSet, cursor: wp.array(dtype=wp.int32), slot: int, sender: in
     out.visible[j] = wp.uint8(wp.int32(visible * 255.0 + 0.5))
 
 
-def _by_receiver(dev, n: int, la: wp.array, lb: wp.array, lvalues: wp.array, lvisible: wp.array) -> LinkSet:
-    """Both directions of the links la–lb (int32[p] node pairs, vec4[p] values, vec2[p] visible
-    fractions; see ``_scatter_kernel``) sorted by receiver into the ``LinkSet`` over n nodes; a
-    receiver's links in the order of the directed links, 2i (receiver la[i]) and 2i + 1 (lb[i]).
+def _by_receiver(dev, n: int, found: list, segments: list) -> LinkSet:
+    """Both directions of the links in ``segments`` ([start, end) pieces, in order) of ``found``
+    (int32 node pairs a, b, vec4 values, vec2 visible fractions; see ``_scatter_kernel``) sorted
+    by receiver into the ``LinkSet`` over n nodes; a receiver's links in the order of the
+    directed links, 2i (receiver a[i]) and 2i + 1 (b[i]), i in segment order.
 
-    On a GPU a radix sort of the directed links by receiver. On the CPU a stable counting sort,
-    one run of the links per thread: each thread counts its run's links per receiver, the counts
-    give each run's place in every row, and each thread places its run there (measured on a 10 k
-    room: 0.015–0.019 CPU s against 0.042–0.048 for the radix sort, same links)."""
+    On a GPU (one segment) a radix sort of the directed links by receiver. On the CPU a stable
+    counting sort, one run of the links per thread: each thread counts its run's links per
+    receiver, the counts give each run's place in every row, and each thread places its run there
+    (measured on a 10 k room: 0.015–0.019 CPU s against 0.042–0.048 for the radix sort, same
+    links)."""
     d = dev.name
-    pairs = la.size
+    pairs = sum(end - start for start, end in segments)
     count = 2 * pairs
     out = LinkSet()
     out.offsets = wp.zeros(n + 1, dtype=wp.int32, device=d)
@@ -1043,6 +1276,7 @@ def _by_receiver(dev, n: int, la: wp.array, lb: wp.array, lvalues: wp.array, lvi
     out.form_factor = wp.empty(max(count, 1), dtype=wp.float32, device=d)
     out.visible = wp.empty(max(count, 1), dtype=wp.uint8, device=d)
     if dev.is_cuda:
+        la, lb, lvalues, lvisible = (x[:pairs] for x in found)
         keys = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
         values = wp.empty(max(2 * count, 2), dtype=wp.int32, device=d)
         device_mod.launch(_directed_kernel, pairs, [la, lb, keys, values], dev)
@@ -1050,16 +1284,22 @@ def _by_receiver(dev, n: int, la: wp.array, lb: wp.array, lvalues: wp.array, lvi
             wp.utils.radix_sort_pairs(keys, values, count, end_bit=max(1, int(n).bit_length()))
         device_mod.launch(_csr_kernel, count, [count, n, keys, values, la, lb, lvalues, lvisible, out], dev)
         return out
+    starts = np.array([start for start, _ in segments] or [0], np.int32)
+    ranks = np.concatenate([[0], np.cumsum([end - start for start, end in segments], dtype=np.int64)])
+    seg_start = wp.array(starts, dtype=wp.int32, device=d)
+    seg_rank = wp.array(ranks.astype(np.int32) if len(segments) else np.zeros(2, np.int32), dtype=wp.int32, device=d)
     runs = dev.threads
     run = max(1, -(-pairs // runs))
     counts = wp.zeros(runs * n, dtype=wp.int32, device=d)  # [run, receiver], then where each run's links go
     totals = wp.zeros(n + 1, dtype=wp.int32, device=d)
-    device_mod.launch(_count_kernel, runs, [run, pairs, n, la, lb, counts], dev)
+    la, lb, lvalues, lvisible = found
+    device_mod.launch(_count_kernel, runs, [run, pairs, n, seg_start, seg_rank, la, lb, counts], dev)
     device_mod.launch(_total_kernel, n, [runs, n, counts, totals], dev)
     with device_mod.section("links.sort", dev):
         wp.utils.array_scan(totals, out.offsets, inclusive=False)
     device_mod.launch(_cursor_kernel, n, [runs, n, out.offsets, counts], dev)
-    device_mod.launch(_place_kernel, runs, [run, pairs, n, la, lb, lvalues, lvisible, counts, out], dev)
+    device_mod.launch(_place_kernel, runs,
+                      [run, pairs, n, seg_start, seg_rank, la, lb, lvalues, lvisible, counts, out], dev)
     return out
 
 
@@ -1092,14 +1332,14 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
         if threshold < COARSEST and _create(problem, trial, threshold, sm, weight, traced) is None:
             continue
         made = _create(problem, oracle, threshold, sm, weight, traced)
-    la, lb, lvalues, lvisible, rounds = made
-    pairs = la.size
+    found, segments, rounds = made
+    pairs = sum(end - start for start, end in segments)
     if threshold > oracle.threshold:
         stages.warn(f"the links did not fit the link budget of {oracle.budget / 2**20:.0f} MB at "
                     f"threshold {oracle.threshold:g}: {2 * pairs} links made at threshold "
                     f"{threshold:g} (coarser, less accurate); raise --link-memory for the finer links")
 
-    out = _by_receiver(dev, tree.count, la, lb, lvalues, lvisible)
+    out = _by_receiver(dev, tree.count, found, segments)
     if dev.is_cuda:
         wp.synchronize_device(d)
     return Links(set=out, pairs=pairs, threshold=threshold, rounds=rounds,

@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import warp as wp
 
-from .formfactor import (OUTLINE_TRIANGLE, PLANE_EPS, disk_ff, far_triangle_ff, outline_ff, side_of,
-                         triangle_view)
+from .elements import FAN_OPEN_IN, FAN_OPEN_OUT, FAN_TANGLED
+from .formfactor import (HORIZON_EPS, INV_TWO_PI, OUTLINE_TRIANGLE, PLANE_EPS, arc_term, disk_ff,
+                         far_triangle_ff, outline_ff, side_of, triangle_view)
 from .rays import lift
 
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
@@ -29,7 +30,8 @@ class Surfels:
     unit); centre: vec3[n] the area-weighted centre of each element's share of its triangles
     (``fan_centre``: where its disk stands as a sender); area: float32[n] (m²); albedo, emission:
     vec3[n]; vertex: int32[n] the vertex each element sits on; fan_offsets: int32[n+1] and
-    fan_triangles: int32[≤3T], each element's triangles (CSR); tri_centre: vec4[T] each
+    fan_triangles: int32[≤3T], each element's triangles (CSR), fan_outline: vec3i[≤3T] each one's
+    edge opposite the element and how it joins the fan (``elements.fan_outline``); tri_centre: vec4[T] each
     triangle's centroid (m) and reach (its farthest corner's distance from it, m); tri_normal:
     vec4[T] its unit normal (along its winding) and size √(2·area) (m) — what ``fan_ff`` would
     otherwise work out again for every point that looks at a triangle.
@@ -47,6 +49,7 @@ class Surfels:
     vertex: wp.array(dtype=wp.int32)
     fan_offsets: wp.array(dtype=wp.int32)
     fan_triangles: wp.array(dtype=wp.int32)
+    fan_outline: wp.array(dtype=wp.vec3i)
     tri_centre: wp.array(dtype=wp.vec4)
     tri_normal: wp.array(dtype=wp.vec4)
 
@@ -66,6 +69,7 @@ def upload(elements, mesh: wp.Mesh, device: str) -> Surfels:
     s.vertex = wp.array(elements.vertex, dtype=wp.int32, device=device)
     s.fan_offsets = wp.array(elements.fan_offsets, dtype=wp.int32, device=device)
     s.fan_triangles = wp.array(elements.fan_triangles, dtype=wp.int32, device=device)
+    s.fan_outline = wp.array(elements.fan_outline, dtype=wp.vec3i, device=device)
     s.centre = wp.empty(elements.count, dtype=wp.vec3, device=device)
     triangles = mesh.indices.shape[0] // 3
     s.tri_centre = wp.empty(triangles, dtype=wp.vec4, device=device)
@@ -168,8 +172,13 @@ def fan_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
     """Form factor from p (unit normal n) to one side of element j's share (a third) of its
     triangles: the front faces for side 1, the back faces for side −1; a triangle counts where p
     lies off its plane by more than PLANE_EPS of its size plus their distance (in the plane it is
-    seen edge-on), exactly, or from ``far_triangle_ff`` where ``triangle_view`` allows (a leaf
-    pair's fans several triangles apart: 3–4× cheaper)."""
+    seen edge-on). Where every triangle of the fan counts and lies wholly above p's horizon, the
+    fan's outline (``outline_fan_ff``); else triangle by triangle, exactly, or from
+    ``far_triangle_ff`` where ``triangle_view`` allows (a leaf pair's fans several triangles apart:
+    3–4× cheaper)."""
+    whole = outline_fan_ff(s, p, n, j, side)
+    if whole >= 0.0:
+        return whole
     total = float(0.0)
     for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
         t = s.fan_triangles[k]
@@ -177,8 +186,7 @@ def fan_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
         nr = s.tri_normal[t]
         centre = wp.vec3(cr[0], cr[1], cr[2])
         normal = wp.vec3(nr[0], nr[1], nr[2])
-        d = p - centre
-        if side * side_of(wp.dot(d, normal), PLANE_EPS * (wp.length(d) + nr[3])) > 0.0:
+        if _counts(p, side, centre, nr):
             view = triangle_view(p, n, centre, cr[3])
             if view >= 0:
                 a = s.points[s.tris[3 * t]]
@@ -189,6 +197,56 @@ def fan_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
                 else:
                     total += outline_ff(p, n, OUTLINE_TRIANGLE, 3, a, b, c, 0.0, 0.0)
     return total / 3.0
+
+
+@wp.func
+def _counts(p: wp.vec3, side: float, centre: wp.vec3, nr: wp.vec4) -> bool:
+    """Whether a triangle (centre, unit normal and size ``nr``: ``Surfels.tri_normal``) shows
+    ``side`` to p, off its plane by more than PLANE_EPS of its size plus their distance."""
+    d = p - centre
+    return side * side_of(wp.dot(d, wp.vec3(nr[0], nr[1], nr[2])), PLANE_EPS * (wp.length(d) + nr[3])) > 0.0
+
+
+@wp.func
+def outline_fan_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
+    """``fan_ff`` from the fan's outline where that is exact, else −1: where p sees ``side`` of
+    every triangle of element j (as ``_counts``, from the element's vertex and without the square
+    root) and no corner lies below
+    p's horizon (by more than HORIZON_EPS of its distance: one on it, a wall's foot seen from the
+    floor, clips nothing), the triangles' contour integrals all take one sign and none is
+    clipped, so their sum is the integral over the edges opposite the element and the open spokes
+    (``elements.fan_outline``: the shared spokes cancel) — a third of the arc terms of summing
+    them triangle by triangle."""
+    v = s.points[s.vertex[j]] - p
+    if not _unclipped(v, n):
+        return -1.0
+    tol = (PLANE_EPS * PLANE_EPS) * wp.dot(v, v)
+    total = float(0.0)
+    for k in range(s.fan_offsets[j], s.fan_offsets[j + 1]):
+        edge = s.fan_outline[k]
+        nr = s.tri_normal[s.fan_triangles[k]]
+        # p's height over the triangle's plane, measured from the element's vertex (a corner)
+        h = -side * wp.dot(v, wp.vec3(nr[0], nr[1], nr[2])) - PLANE_EPS * nr[3]
+        if edge[2] >= FAN_TANGLED or h <= 0.0 or h * h <= tol:
+            return -1.0
+        a = s.points[edge[0]] - p
+        b = s.points[edge[1]] - p
+        if not (_unclipped(a, n) and _unclipped(b, n)):
+            return -1.0
+        total += arc_term(a, b, n)
+        if (edge[2] & FAN_OPEN_OUT) != 0:
+            total += arc_term(v, a, n)
+        if (edge[2] & FAN_OPEN_IN) != 0:
+            total += arc_term(b, v, n)
+    return wp.abs(total) * (INV_TWO_PI / 3.0)
+
+
+@wp.func
+def _unclipped(x: wp.vec3, n: wp.vec3) -> bool:
+    """Whether point x (relative to the receiver) lies above the horizon of unit normal n, or below
+    it by at most HORIZON_EPS of its distance (no square root)."""
+    h = wp.dot(x, n)
+    return h >= 0.0 or h * h <= (HORIZON_EPS * HORIZON_EPS) * wp.dot(x, x)
 
 
 @wp.func

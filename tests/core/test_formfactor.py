@@ -3,8 +3,13 @@ import numpy as np
 import pytest
 import warp as wp
 
-from radiosity_baker.core import device
-from radiosity_baker.core.formfactor import FAR_REACH, disk_ff, far_triangle_ff, outline_ff, triangle_ff
+import shapes
+from radiosity_baker.core import Settings, device
+from radiosity_baker.core.elements import FAN_OPEN_IN, FAN_OPEN_OUT, FAN_TANGLED, fan_outline
+from radiosity_baker.core.formfactor import (FAR_REACH, arc_angle, disk_ff, far_triangle_ff, outline_ff,
+                                             triangle_ff)
+from radiosity_baker.core.problem import Problem
+from radiosity_baker.core.surfels import Surfels, outline_fan_ff
 
 device.init_warp()
 
@@ -153,3 +158,86 @@ def test_far_triangles_quadrature_matches_the_exact_form_factor():
     rel = np.abs(far.numpy() / contour_ff(p, n, tris) - 1.0)
     assert len(rel) > 4000
     assert rel.max() < 0.005 and rel.mean() < 0.0005
+
+
+def test_arc_angle_is_as_close_to_the_angle_as_float32_atan2():
+    """The polynomial atan2 of the contour integral's arcs against the angle in double precision,
+    over random directions and the octant edges: no farther off than numpy's float32 atan2 on the
+    same inputs, worst and mean (measured: 2.9·10⁻⁷ and 5.5·10⁻⁸ rad, against 3.1·10⁻⁷ and
+    5.5·10⁻⁸: rounding to float32 near π alone is up to 1.2·10⁻⁷)."""
+    rng = np.random.default_rng(7)
+    y = np.concatenate([rng.random(200000) * 10.0, [0.0, 1.0, 1.0, 1.0, 0.0, 1e-30, 3.0]]).astype(np.float32)
+    x = np.concatenate([rng.normal(size=200000) * 10.0, [1.0, 0.0, 1.0, -1.0, -1.0, -2.0, -3.0]]).astype(np.float32)
+    out = wp.zeros(len(y), dtype=float, device="cpu")
+    wp.launch(_angle_kernel, dim=len(y), inputs=[wp.array(y, dtype=float), wp.array(x, dtype=float), out])
+    exact = np.arctan2(y.astype(np.float64), x.astype(np.float64))
+    ours = np.abs(out.numpy() - exact)
+    libm = np.abs(np.arctan2(y, x).astype(np.float64) - exact)
+    assert ours.max() <= libm.max() and ours.mean() <= 1.05 * libm.mean()
+
+
+@wp.kernel
+def _angle_kernel(y: wp.array(dtype=float), x: wp.array(dtype=float), out: wp.array(dtype=float)):
+    i = wp.tid()
+    out[i] = arc_angle(y[i], x[i])
+
+
+@wp.kernel
+def _fan_kernel(s: Surfels, p: wp.array(dtype=wp.vec3), n: wp.array(dtype=wp.vec3), j: wp.array(dtype=wp.int32),
+                out: wp.array(dtype=wp.vec2)):
+    i = wp.tid()
+    e = j[i]
+    each = float(0.0)
+    for k in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
+        t = s.fan_triangles[k]
+        each += triangle_ff(p[i], n[i], s.points[s.tris[3 * t]], s.points[s.tris[3 * t + 1]], s.points[s.tris[3 * t + 2]])
+    out[i] = wp.vec2(outline_fan_ff(s, p[i], n[i], e, 1.0), each / 3.0)
+
+
+def test_a_fan_seen_whole_from_its_outline_matches_its_triangles_one_by_one():
+    """An element's fan from its outer edges and open spokes (``surfels.outline_fan_ff``) against
+    its triangles' exact form factors summed one by one, from random points near random elements
+    of a bumpy grid (closed, curved fans; open ones on its border) and a box (open fans at every
+    edge): equal to 10⁻⁴ wherever the outline applies, which is most points that see the fan."""
+    s, pos, nrm = fan_scene()
+    rng = np.random.default_rng(11)
+    k = 20000
+    j = rng.integers(0, len(pos), k)
+    p = pos[j] + nrm[j] * rng.uniform(0.02, 0.4, (k, 1)) + rng.normal(scale=0.15, size=(k, 3))
+    n = -nrm[j] + rng.normal(scale=0.5, size=(k, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    out = wp.zeros(k, dtype=wp.vec2, device="cpu")
+    wp.launch(_fan_kernel, dim=k, inputs=[s, wp.array(p.astype(np.float32), dtype=wp.vec3),
+                                          wp.array(n.astype(np.float32), dtype=wp.vec3),
+                                          wp.array(j.astype(np.int32), dtype=wp.int32), out])
+    whole, each = out.numpy().T
+    applies = whole >= 0.0
+    assert (applies & (each > 1e-4)).sum() > 0.5 * (each > 1e-4).sum()
+    assert np.abs(whole[applies] - each[applies]).max() <= 1e-4 * each[applies].max()
+    assert np.allclose(whole[applies], each[applies], rtol=1e-4, atol=1e-7)
+
+
+def fan_scene():
+    """Surfels of a bumpy 12×12 grid and a 0.4 m box beside it, with their element points and
+    normals."""
+    p, n, t = shapes.grid(2.0, 12)
+    p[:, 2] = 0.15 * np.sin(3.0 * p[:, 0]) * np.cos(2.0 * p[:, 1])
+    parts = [(p, shapes.flat(p, t), t, (0.5,) * 3, (0,) * 3)]
+    parts += [(*face, (0.5,) * 3, (0,) * 3) for face in shapes.box(0.4, 3, (1.4, 0.0, 0.2))]
+    problem = Problem(shapes.scene(parts), Settings(device="cpu"))
+    return problem.surfels, problem.elements.position.astype(np.float64), problem.elements.normal.astype(np.float64)
+
+
+def test_fan_outline_flags_the_open_spokes_and_tangled_fans():
+    """A square of two triangles around corner 0: the spoke they share cancels, the outer ones are
+    open; a triangle listed twice repeats its spokes, so its fan is tangled."""
+    tris = np.array([[0, 1, 2], [0, 2, 3]])
+    corners = tris.reshape(-1)
+    order = np.argsort(corners, kind="stable")
+    table = fan_outline(tris, corners, order)
+    first = table[corners[order] == 0]
+    assert first[:, :2].tolist() == [[1, 2], [2, 3]]
+    assert first[:, 2].tolist() == [FAN_OPEN_OUT, FAN_OPEN_IN]
+    twice = np.array([[0, 1, 2], [0, 1, 2]])
+    order = np.argsort(twice.reshape(-1), kind="stable")
+    assert (fan_outline(twice, twice.reshape(-1), order)[:, 2] & FAN_TANGLED).all()

@@ -1,5 +1,6 @@
 """``core.device.launch``: every thread of a launch runs once however the CPU waves are cut
-(even, uneven, too small to split), and Ctrl-C while its thread pool works."""
+(even, uneven, one range per thread, too small to split), and Ctrl-C while its thread pool
+works."""
 import os
 import signal
 
@@ -19,7 +20,8 @@ def _mark_kernel(offset: int, marks: wp.array(dtype=wp.int32)):
 @pytest.mark.parametrize("threads", [2, 3])
 @pytest.mark.parametrize("n, options", [(1, {}), (1000, {}), (100003, {"uneven": True}),
                                         (100003, {"uneven": True, "chunks": 3}),
-                                        (5000, {"min_split": 4096}), (70000, {"min_split": 4096})])
+                                        (5000, {"min_split": 4096}), (70000, {"min_split": 4096}),
+                                        (37, {"one_by_one": True}), (37, {"one_by_one": True, "chunks": 4})])
 def test_every_thread_of_a_launch_runs_exactly_once(threads, n, options):
     dev = device.Device("cpu", threads=threads)
     marks = wp.zeros(n, dtype=wp.int32, device="cpu")

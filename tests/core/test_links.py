@@ -1,6 +1,8 @@
 """Links between tree nodes: unique and sorted by receiver, every pair of leaves covered by exactly
 one link, transfers that add up to the all-pairs form factors, about linear growth with the
 element count, a budget that coarsens the links with a message, and a rebuild after a move."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -232,3 +234,57 @@ def test_a_profile_times_each_kernel_of_a_link_build_and_nothing_when_off():
     assert all(r["seconds"] >= 0 and r["cpu_seconds"] >= 0 for r in rows.values())
     links.build(problem, links.Oracle(threshold=0.1))
     assert table.as_dict() == rows
+
+
+def rows(made):
+    """Each receiver's directed links as a sorted list of (sender, transfer, normaliser, visible)."""
+    receiver, *rest = csr(made)
+    order = np.lexsort((rest[0], receiver))
+    return receiver[order], [x[order] for x in rest]
+
+
+def test_depth_first_links_are_the_breadth_first_ones_even_when_runs_outgrow_their_regions(monkeypatch):
+    """On the CPU the links below a breadth-first round's queue are made depth first: the same
+    links with the same values (in another order), here with a budget barely over them so that
+    the runs' regions fill up and the runs go on where room is left."""
+    problem = Problem(box_room(10), CPU)
+    oracle = hierarchical.oracle(CPU)
+    monkeypatch.setattr(links, "DEPTH_FIRST", 10 ** 9)
+    wide = links.build(problem, oracle)
+    launches = count_launches(monkeypatch)
+    monkeypatch.setattr(links, "DEPTH_FIRST", 64)
+    monkeypatch.setattr(links, "MIN_REGION", 1)
+    tight = replace(oracle, budget=int(wide.pairs * 1.05) * links.BYTES_PER_LINK)
+    deep = links.build(problem, tight)
+    assert launches.count("_depth_first_kernel") > 1 and deep.threshold == oracle.threshold
+    assert deep.pairs == wide.pairs and deep.rays_traced == wide.rays_traced
+    (r0, x0), (r1, x1) = rows(wide), rows(deep)
+    assert np.array_equal(r0, r1) and all(np.array_equal(a, b) for a, b in zip(x0, x1))
+
+
+def count_launches(monkeypatch) -> list:
+    """The names of the kernels ``links`` launches from now on, in order."""
+    names = []
+    real = links.device_mod.launch
+
+    def counted(kernel, n, inputs, dev, **options):
+        names.append(kernel.key)
+        return real(kernel, n, inputs, dev, **options)
+
+    monkeypatch.setattr(links.device_mod, "launch", counted)
+    return names
+
+
+def test_links_do_not_depend_on_the_number_of_threads(monkeypatch):
+    """Same links in the same order (so the same sums over them) on one thread and on three, depth
+    first as well as breadth first."""
+    launches = count_launches(monkeypatch)
+    monkeypatch.setattr(links, "DEPTH_FIRST", 64)
+    made = []
+    for threads in (1, 3):
+        monkeypatch.setenv("RADIOSITY_BAKER_THREADS", str(threads))
+        problem = Problem(box_room(10), CPU)
+        assert problem.device.threads == threads
+        made.append(csr(links.build(problem, hierarchical.oracle(CPU))))
+    assert "_depth_first_kernel" in launches
+    assert all(np.array_equal(a, b) for a, b in zip(*made))
