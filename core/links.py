@@ -1177,6 +1177,14 @@ def _segment_of(seg_rank: wp.array(dtype=wp.int32), r: int) -> int:
     return lo
 
 
+@wp.func
+def _segment_from(seg_rank: wp.array(dtype=wp.int32), g: int, r: int) -> int:
+    """The segment holding the link of rank r, looked for from segment g (at or before it) on."""
+    while r >= seg_rank[g + 1]:
+        g += 1
+    return g
+
+
 @wp.kernel
 def _count_kernel(offset: int, run: int, pairs: int, m: int, seg_start: wp.array(dtype=wp.int32),
                   seg_rank: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
@@ -1189,8 +1197,7 @@ def _count_kernel(offset: int, run: int, pairs: int, m: int, seg_start: wp.array
     r0 = t * run
     g = _segment_of(seg_rank, r0)
     for r in range(r0, wp.min(r0 + run, pairs)):
-        while r >= seg_rank[g + 1]:
-            g += 1
+        g = _segment_from(seg_rank, g, r)
         i = seg_start[g] + r - seg_rank[g]
         counts[row + la[i]] += 1
         counts[row + lb[i]] += 1
@@ -1233,8 +1240,7 @@ def _place_kernel(offset: int, run: int, pairs: int, m: int, seg_start: wp.array
     r0 = t * run
     g = _segment_of(seg_rank, r0)
     for r in range(r0, wp.min(r0 + run, pairs)):
-        while r >= seg_rank[g + 1]:
-            g += 1
+        g = _segment_from(seg_rank, g, r)
         i = seg_start[g] + r - seg_rank[g]
         a = la[i]
         b = lb[i]
