@@ -96,8 +96,7 @@ class Elements:
     fan_offsets: int32[n+1] and fan_triangles: int32[3T] list, per element, the triangles it is a
     corner of (CSR), for exact near-field form factors; fan_outline: int32[3T,3] per entry of that
     list, its triangle's edge opposite the element and how it joins the fan (``fan_outline``).
-    corner: int32[T,3] the element of each triangle
-    corner.
+    corner: int32[T,3] the element of each triangle corner.
     """
 
     position: np.ndarray

@@ -31,8 +31,8 @@ class Surfels:
     (``fan_centre``: where its disk stands as a sender); area: float32[n] (m²); albedo, emission:
     vec3[n]; vertex: int32[n] the vertex each element sits on; fan_offsets: int32[n+1] and
     fan_triangles: int32[≤3T], each element's triangles (CSR), fan_outline: vec3i[≤3T] each one's
-    edge opposite the element and how it joins the fan (``elements.fan_outline``); tri_centre: vec4[T] each
-    triangle's centroid (m) and reach (its farthest corner's distance from it, m); tri_normal:
+    edge opposite the element and how it joins the fan (``elements.fan_outline``); tri_centre:
+    vec4[T] each triangle's centroid (m) and reach (its farthest corner's distance from it, m); tri_normal:
     vec4[T] its unit normal (along its winding) and size √(2·area) (m) — what ``fan_ff`` would
     otherwise work out again for every point that looks at a triangle.
     """
@@ -211,12 +211,12 @@ def _counts(p: wp.vec3, side: float, centre: wp.vec3, nr: wp.vec4) -> bool:
 def outline_fan_ff(s: Surfels, p: wp.vec3, n: wp.vec3, j: int, side: float) -> float:
     """``fan_ff`` from the fan's outline where that is exact, else −1: where p sees ``side`` of
     every triangle of element j (as ``_counts``, from the element's vertex and without the square
-    root) and no corner lies below
-    p's horizon (by more than HORIZON_EPS of its distance: one on it, a wall's foot seen from the
-    floor, clips nothing), the triangles' contour integrals all take one sign and none is
-    clipped, so their sum is the integral over the edges opposite the element and the open spokes
-    (``elements.fan_outline``: the shared spokes cancel) — a third of the arc terms of summing
-    them triangle by triangle."""
+    root) and no corner lies below p's horizon (by more than HORIZON_EPS of its distance: one on
+    it, a wall's foot seen from the floor, clips nothing), the triangles' contour integrals all
+    take one sign and none is clipped, so their sum is the integral over the edges opposite the
+    element and the open spokes (``elements.fan_outline``: the shared spokes cancel) — a third of
+    the arc terms of summing them triangle by triangle. It stops at the first triangle that
+    breaks this, so a fan it cannot take costs ``fan_ff`` little more than its own loop."""
     v = s.points[s.vertex[j]] - p
     if not _unclipped(v, n):
         return -1.0
