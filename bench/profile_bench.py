@@ -48,8 +48,11 @@ CATEGORIES = {
     "scan/scatter": ["links.scan", "links._scatter_kernel", "links.concatenate", "links.grow"],
     "sort": ["links._directed_kernel", "links.sort", "links._csr_kernel", "links._count_kernel",
              "links._total_kernel", "links._cursor_kernel", "links._place_kernel"],
-    "link setup": ["links._cone_kernel", "links._leaf_plane_kernel", "links._max_kernel",
-                   "links._first_leaf_kernel", "links._canonical_kernel"],
+    "link setup": ["links._max_kernel", "links._first_leaf_kernel", "links._canonical_kernel"],
+    # the cluster tree with its normal cones (before 2026-12-05 the cones were link setup)
+    "tree": ["hierarchy._morton_kernel", "hierarchy._flag_kernel", "hierarchy._link_kernel",
+             "hierarchy._place_kernel", "hierarchy._descend_kernel", "hierarchy._next_kernel",
+             "hierarchy._leaf_kernel", "hierarchy._merge_kernel"],
     "sweeps": ["hierarchical._gather_kernel", "hierarchical._push_kernel", "hierarchy.", "base.",
                "hits._sweep_kernel"],
     "final gather": ["hierarchical._above_kernel", "hierarchical._leaf_gather_kernel"],

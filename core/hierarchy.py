@@ -8,7 +8,8 @@ so every node is an octree cell holding 1–8 children (a cell with many coincid
 them all), and a level stops at a single root. O(n) work in O(Morton bits) launches, no Python
 loop over nodes. Each node is a disk standing for its subtree: area-weighted position,
 area-weighted mean normal (unit) with its length kept as ``spread`` (1: all normals agree, 0:
-they cancel), summed area and a bounding radius of the subtree's disks.
+they cancel), summed area and a bounding radius of the subtree's disks; beside them, what link
+oracles bound with: the cone of the subtree's normals and how flat its surface lies.
 
 Nodes are stored in one array, level by level, leaves first and the root last; a node's children
 are consecutive. Traversal is stackless: ``descend`` goes down (past one-child cells), ``next`` is
@@ -28,6 +29,9 @@ from .surfels import Surfels
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
 MORTON_BITS = 10  # per axis: 30-bit codes
+# Nodes per core below which a level's merge stays on the calling thread (``device.launch``'s
+# min_split): the pool's ~80 µs exceed a few hundred nodes' merges.
+SPLIT_NODES = 1024
 # Levels of the tree at most: the leaves and one per Morton bit (the traversal keeps a weight per level).
 MAX_LEVELS = MORTON_BITS + 1
 
@@ -73,12 +77,19 @@ class Nodes:
 class Tree:
     """A cluster tree: ``nodes`` (the ``Nodes`` struct on ``device``), ``order`` int32[n] the
     elements in leaf order (kept for refits) and ``level_offsets`` numpy int64[L+1] (nodes of
-    level l are level_offsets[l] … level_offsets[l+1]−1; the root is the last node)."""
+    level l are level_offsets[l] … level_offsets[l+1]−1; the root is the last node). What link
+    oracles bound with, set with the disks: ``cone`` vec3[m] (cos, sin, 2 sin(·/2)) of the
+    half-angle of the cone around each node's normal that holds its subtree's normals (leaves
+    (1, 0, 0)); ``plane`` vec2[m] (thickness, extent) of its subtree's surface around its plane:
+    the largest distance of a point of it from the plane (position, normal) and from its position
+    (m; a leaf's of its element's whole fan triangles, what ``surfels.face_ff`` integrates)."""
 
     nodes: Nodes
     order: wp.array
     level_offsets: np.ndarray
     device: device_mod.Device
+    cone: wp.array
+    plane: wp.array
 
     @property
     def count(self) -> int:
@@ -128,12 +139,25 @@ def share_reach(s: Surfels, e: int, radius: float) -> float:
 
 
 @wp.kernel
-def _leaf_kernel(offset: int, order: wp.array(dtype=wp.int32), s: Surfels, t: Nodes):
+def _leaf_kernel(offset: int, order: wp.array(dtype=wp.int32), s: Surfels, t: Nodes,
+                 cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2)):
     k = wp.tid() + offset
     e = order[k]
     a = wp.max(s.area[e], 0.0)
-    t.position[k] = s.pos[e]
-    t.normal[k] = s.nrm[e]
+    p = s.pos[e]
+    n = s.nrm[e]
+    thick = float(0.0)
+    extent = float(0.0)
+    for f in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
+        tri = s.fan_triangles[f]
+        for c in range(3):
+            x = s.points[s.tris[3 * tri + c]] - p
+            thick = wp.max(thick, wp.abs(wp.dot(x, n)))
+            extent = wp.max(extent, wp.length(x))
+    cone[k] = wp.vec3(1.0, 0.0, 0.0)
+    plane[k] = wp.vec2(thick, extent)
+    t.position[k] = p
+    t.normal[k] = n
     t.spread[k] = 1.0
     t.area[k] = a
     t.radius[k] = wp.sqrt(a / 3.141592653589793)
@@ -150,8 +174,10 @@ def _child_end(node: int, level_end: int, child_level_end: int, first_child: wp.
 
 
 @wp.kernel
-def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int, t: Nodes):
-    """Disk of node node0 + k from its children's disks."""
+def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int, t: Nodes,
+                  cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2)):
+    """Disk of node node0 + k from its children's disks; its normal cone and plane (``Tree``) from
+    theirs."""
     node = node0 + wp.tid() + offset
     n_pos = t.position
     n_nrm = t.normal
@@ -184,12 +210,29 @@ def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
         r = wp.max(r, wp.length(n_pos[c] - centre) + n_radius[c])
         reach = wp.max(reach, wp.length(n_pos[c] - centre) + t.reach[c])
     s = wp.length(mean_n)
+    n = wp.vec3(0.0, 0.0, 1.0)
+    if s > 0.0:
+        n = mean_n / s
+    angle = float(0.0)
+    thick = float(0.0)
+    extent = float(0.0)
+    for c in range(c0, c1):
+        cc = cone[c]
+        nc = n_nrm[c]
+        # the child's half-angle back from its cone (|sin|: float32's sin(π) is below 0)
+        angle = wp.max(angle, wp.acos(wp.clamp(wp.dot(n, nc), -1.0, 1.0)) + wp.atan2(wp.abs(cc[1]), cc[0]))
+        # a child's point x = its centre + w, |w| ≤ its extent, |w·n_c| ≤ its thickness
+        x = n_pos[c] - centre
+        pc = plane[c]
+        thick = wp.max(thick, wp.abs(wp.dot(x, n)) + pc[0] + pc[1] * wp.length(n - nc))
+        extent = wp.max(extent, wp.length(x) + pc[1])
+    angle = wp.min(angle, 3.141592653589793)
+    ca = wp.cos(angle)
+    cone[node] = wp.vec3(ca, wp.sin(angle), wp.sqrt(2.0 * wp.max(1.0 - ca, 0.0)))
+    plane[node] = wp.vec2(thick, extent)
     n_pos[node] = centre
     n_spread[node] = s
-    if s > 0.0:
-        n_nrm[node] = mean_n / s
-    else:
-        n_nrm[node] = wp.vec3(0.0, 0.0, 1.0)
+    n_nrm[node] = n
     n_area[node] = total
     n_radius[node] = r
     t.reach[node] = reach
@@ -313,7 +356,8 @@ def build(problem) -> Tree:
         device_mod.launch(_next_kernel, sizes[lv],
                           [int(offsets[lv]), int(offsets[lv + 1]), t.parent, t.next],
                           dev)
-    tree = Tree(nodes=t, order=order[:n], level_offsets=offsets, device=dev)
+    tree = Tree(nodes=t, order=order[:n], level_offsets=offsets, device=dev,
+                cone=wp.empty(m, dtype=wp.vec3, device=d), plane=wp.empty(m, dtype=wp.vec2, device=d))
     refit(tree, problem.surfels)
     return tree
 
@@ -325,10 +369,12 @@ def refit(tree: Tree, surfels) -> Tree:
     clusters: rebuild then."""
     dev = tree.device
     offs = tree.level_offsets
-    device_mod.launch(_leaf_kernel, int(offs[1]), [tree.order, surfels, tree.nodes], dev)
+    bounds = [tree.cone, tree.plane]
+    device_mod.launch(_leaf_kernel, int(offs[1]), [tree.order, surfels, tree.nodes, *bounds], dev)
     for lv in range(1, len(offs) - 1):
         device_mod.launch(_merge_kernel, int(offs[lv + 1] - offs[lv]),
-                          [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), tree.nodes], dev)
+                          [int(offs[lv]), int(offs[lv + 1]), int(offs[lv]), tree.nodes, *bounds], dev,
+                          min_split=SPLIT_NODES)
     return tree
 
 

@@ -121,9 +121,9 @@ TRIAL_MARGIN = 1.5
 GRAIN = 64
 # Threads per core below which a round's launch stays on the calling thread (``device.launch``'s
 # min_split; the pool's ~80 µs exceed a few hundred candidates' work): the oracle's threads
-# (GRAIN candidates, 3–5 µs), the scatter's (GRAIN candidates, ~0.5 µs), a node's cone (~50 ns).
+# (GRAIN candidates, 3–5 µs), the scatter's (GRAIN candidates, ~0.5 µs).
 # (The lamp scene's 17 rounds: link creation 21 → 16 ms.)
-SPLIT_ORACLE, SPLIT_SCATTER, SPLIT_NODES = 32, 256, 2048
+SPLIT_ORACLE, SPLIT_SCATTER = 32, 256
 # On the CPU, once a breadth-first round's queue holds DEPTH_FIRST candidates, the rest of the
 # build goes depth first (``_depth_first``), in DEPTH_RUNS runs taken in turn by the threads (so a
 # core that drew light runs takes more), each run's links into its own region of at least
@@ -221,31 +221,31 @@ class Sampling:
 
 
 @wp.func
-def cos_bound(n: wp.vec3, cone: wp.vec3, u: wp.vec3, beta: wp.vec2) -> float:
+def cos_bound(dn: float, d2: float, cone: wp.vec3, beta: wp.vec2, inv_d2: float) -> float:
     """An upper bound of n'·u' over normals n' within a cone of unit n and directions u' within
-    angle β of unit u: the cosine of the angle between n and u less the cone's and β's (1 when
-    that is negative); cone and beta as (cos, sin, …) of their half-angles, so no trigonometry is
-    needed."""
-    c = cone[0] * beta[0] - cone[1] * beta[1]  # cos and sin of the two half-angles' sum γ
+    angle β of a vector v, from dn = n·v, d2 = v·v and inv_d2 = 1/d2: the cosine of the angle
+    between n and v less the cone's and β's (1 when that is negative); cone as (cos, sin, …) of
+    its half-angle, beta as |v|·(cos, sin) of β. Written in n·v and v·v so that the square roots
+    and the division are independent of each other, not a chain (``pair_need`` on room20k's
+    linked pairs: 28 → 23 ns)."""
+    c = cone[0] * beta[0] - cone[1] * beta[1]  # |v|·cos and |v|·sin of the half-angles' sum γ
     g = cone[1] * beta[0] + cone[0] * beta[1]
-    ct = wp.clamp(wp.dot(n, u), -1.0, 1.0)
-    if g < 0.0 or ct >= c:  # γ > π, or the angle to u is within γ
+    if g < 0.0 or dn >= c:  # γ > π, or the angle to v is within γ
         return 1.0
-    return ct * c + wp.sqrt(1.0 - ct * ct) * g
+    return (dn * c + wp.sqrt(wp.max(d2 - dn * dn, 0.0)) * g) * inv_d2
 
 
 @wp.func
-def facing(na: wp.vec3, cone_a: wp.vec3, nb: wp.vec3, cone_b: wp.vec3, u: wp.vec3, spread: float,
-           sides: int) -> wp.vec2:
+def facing(dn_a: float, cone_a: wp.vec3, dn_b: float, cone_b: wp.vec3, d2: float, inv_d2: float,
+           beta: wp.vec2, sides: int) -> wp.vec2:
     """(bound of a's cosine, of b's) over their normal cones and the directions from a to b within
-    asin(``spread``) of unit u (``cos_bound``), either face with ``sides`` 2."""
-    sb = wp.min(spread, 1.0)
-    beta = wp.vec2(wp.sqrt(1.0 - sb * sb), sb)
-    ca = cos_bound(na, cone_a, u, beta)
-    cb = cos_bound(nb, cone_b, -u, beta)
+    angle β of v = b − a (``cos_bound``: dn_a = n_a·v, dn_b = −n_b·v, d2 = v·v, beta = |v|·(cos,
+    sin) of β), either face with ``sides`` 2."""
+    ca = cos_bound(dn_a, d2, cone_a, beta, inv_d2)
+    cb = cos_bound(dn_b, d2, cone_b, beta, inv_d2)
     if sides == 2:
-        ca = wp.max(ca, cos_bound(-na, cone_a, u, beta))
-        cb = wp.max(cb, cos_bound(-nb, cone_b, -u, beta))
+        ca = wp.max(ca, cos_bound(-dn_a, d2, cone_a, beta, inv_d2))
+        cb = wp.max(cb, cos_bound(-dn_b, d2, cone_b, beta, inv_d2))
     return wp.vec2(ca, cb)
 
 
@@ -268,21 +268,25 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     (r = 0, area 0, cone (1, 0)) as a needs nothing itself. With ``sides`` 2 either face counts
     (antiradiance crosses surfaces both ways): the cosines are bounded over both faces."""
     v = pb - pa
-    d = wp.length(v)
-    gap = d - ra - rb
-    if gap <= 0.0:
+    d2 = wp.dot(v, v)
+    r = ra + rb
+    if d2 <= r * r:
         return wp.vec3(1.0, 1.0, 1.0)
-    inv = 1.0 / d
-    u = v * inv
-    cosines = facing(na, cone_a, nb, cone_b, u, (ra + rb) * inv, sides)
+    inv_d2 = 1.0 / d2
+    dn_a = wp.dot(na, v)
+    dn_b = -wp.dot(nb, v)
+    # the spheres' directions lie within asin(r / d) of v
+    cosines = facing(dn_a, cone_a, dn_b, cone_b, d2, inv_d2, wp.vec2(wp.sqrt(d2 - r * r), r), sides)
     if cosines[0] <= 0.0 or cosines[1] <= 0.0:
         # the disks face away; the surfaces around them may not
-        cosines = facing(na, cone_a, nb, cone_b, u, reach * inv, sides)
+        rs = wp.min(reach, wp.sqrt(d2))
+        cosines = facing(dn_a, cone_a, dn_b, cone_b, d2, inv_d2, wp.vec2(wp.sqrt(wp.max(d2 - rs * rs, 0.0)), rs),
+                         sides)
         if cosines[0] <= 0.0 or cosines[1] <= 0.0:
             return wp.vec3(0.0, 0.0, 0.0)
     ca = cosines[0]
     cb = cosines[1]
-    g2 = PI * d * d
+    g2 = PI * d2
     g_ab = area_b * cb / (g2 + area_b)  # b seen from a, without a's cosine
     g_ba = area_a * ca / (g2 + area_a)
     need_a = wp.max(g_ba * cb, g_ab * CONE_WEIGHT * cone_a[2])
@@ -292,10 +296,10 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
 
 @wp.func
 def coplanar(t: Nodes, plane: wp.array(dtype=wp.vec2), a: int, b: int) -> bool:
-    """Whether the surfaces of nodes a and b (``cones``' thickness and extent around their planes)
-    lie in one plane, to FLAT of their extents and distance: then no point of either sees the
-    other but edge-on, and the pair exchanges no light at any depth (a flat wall's clusters with
-    each other, a node with itself)."""
+    """Whether the surfaces of nodes a and b (``hierarchy.Tree.plane``: their thickness and extent
+    around their planes) lie in one plane, to FLAT of their extents and distance: then no point
+    of either sees the other but edge-on, and the pair exchanges no light at any depth (a flat
+    wall's clusters with each other, a node with itself)."""
     pa = plane[a]
     pb = plane[b]
     if a == b:
@@ -566,52 +570,6 @@ def _normaliser(unoccluded: float, centroid: float) -> float:
     1/d² exceeds its value at the centre, by a few per cent; an average near 0 — a receiver cluster
     folded round a near sender — must not blow the ratio up)."""
     return wp.clamp(centroid, unoccluded / JENSEN, unoccluded)
-
-
-@wp.kernel
-def _leaf_plane_kernel(offset: int, t: Nodes, s: Surfels, plane: wp.array(dtype=wp.vec2)):
-    """Leaf k: (thickness, extent) of its element's whole fan triangles (what ``surfels.face_ff``
-    integrates): their corners' largest distance from the leaf's plane (position, normal) and from
-    its position (m)."""
-    k = wp.tid() + offset
-    e = t.element[k]
-    p = t.position[k]
-    n = t.normal[k]
-    thick = float(0.0)
-    extent = float(0.0)
-    for f in range(s.fan_offsets[e], s.fan_offsets[e + 1]):
-        tri = s.fan_triangles[f]
-        for c in range(3):
-            x = s.points[s.tris[3 * tri + c]] - p
-            thick = wp.max(thick, wp.abs(wp.dot(x, n)))
-            extent = wp.max(extent, wp.length(x))
-    plane[k] = wp.vec2(thick, extent)
-
-
-@wp.kernel
-def _cone_kernel(offset: int, node0: int, t: Nodes, angle: wp.array(dtype=wp.float32),
-                 cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2)):
-    """Half-angle of the cone around each node's normal holding its subtree's normals, from its
-    children's (already set; leaves 0), and its (cos, sin, 2 sin(·/2)); the (thickness, extent)
-    of its surface around its plane, bounded from its children's (``_leaf_plane_kernel``)."""
-    node = node0 + wp.tid() + offset
-    n = t.normal[node]
-    p = t.position[node]
-    a = float(0.0)
-    thick = float(0.0)
-    extent = float(0.0)
-    for c in range(t.first_child[node], t.child_end[node]):
-        a = wp.max(a, wp.acos(wp.clamp(wp.dot(n, t.normal[c]), -1.0, 1.0)) + angle[c])
-        # a child's point x = its centre + w, |w| ≤ its extent, |w·n_c| ≤ its thickness
-        x = t.position[c] - p
-        pc = plane[c]
-        thick = wp.max(thick, wp.abs(wp.dot(x, n)) + pc[0] + pc[1] * wp.length(n - t.normal[c]))
-        extent = wp.max(extent, wp.length(x) + pc[1])
-    a = wp.min(a, PI)
-    angle[node] = a
-    ca = wp.cos(a)
-    cone[node] = wp.vec3(ca, wp.sin(a), wp.sqrt(2.0 * wp.max(1.0 - ca, 0.0)))
-    plane[node] = wp.vec2(thick, extent)
 
 
 @wp.kernel
@@ -903,22 +861,6 @@ def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
             out.offsets[q] = count
 
 
-def cones(tree, surfels: Surfels):
-    """Per node (leaves first, one launch per level): vec3[m] (cos, sin, 2 sin(·/2)) of its
-    normal-cone half-angle over its subtree (leaves (1, 0, 0)); vec2[m] (thickness, extent) of its surface
-    around its plane (m; see ``coplanar``)."""
-    dev = tree.device
-    angle = wp.zeros(tree.count, dtype=wp.float32, device=dev.name)
-    cone = wp.full(tree.count, wp.vec3(1.0, 0.0, 0.0), dtype=wp.vec3, device=dev.name)
-    plane = wp.empty(tree.count, dtype=wp.vec2, device=dev.name)
-    offs = tree.level_offsets
-    device_mod.launch(_leaf_plane_kernel, int(offs[1]), [tree.nodes, surfels, plane], dev)
-    for lv in range(1, len(offs) - 1):
-        device_mod.launch(_cone_kernel, int(offs[lv + 1] - offs[lv]),
-                          [int(offs[lv]), tree.nodes, angle, cone, plane], dev, min_split=SPLIT_NODES)
-    return cone, plane
-
-
 def leaf_luminance(tree, radiance: np.ndarray) -> np.ndarray:
     """float64[n]: the luminance of ``radiance`` (float32[n,3] per element) in leaf order."""
     lum = np.asarray(radiance, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
@@ -981,6 +923,17 @@ def sampling(tree, lum: np.ndarray | None = None, floor: float = 0.0,
     return sm
 
 
+def _unsampled(device: str) -> Sampling:
+    """The ``Sampling`` of an oracle without rays, which draws no sample leaves: one-element arrays
+    (the first leaves and running sums cost 1.3 ms of room20k's 85 ms link build)."""
+    sm = Sampling()
+    sm.first_leaf = wp.zeros(1, dtype=wp.int32, device=device)
+    sm.cum = wp.zeros(1, dtype=wp.float64, device=device)
+    sm.glow, sm.open = (wp.zeros(1, dtype=wp.float32, device=device) for _ in range(2))
+    sm.floor = 0.0
+    return sm
+
+
 def _int(a: wp.array, i: int) -> int:
     return int(a[i:i + 1].numpy()[0])
 
@@ -1002,11 +955,10 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     tree, dev, stages = problem.tree, problem.device, problem.stages
     d = dev.name
     t = tree.nodes
-    cone, plane = cones(tree, problem.surfels)
     weighted = weight is not None
     if weight is None:
         weight = wp.zeros(1, dtype=wp.float32, device=d)
-    decide = [t, problem.surfels, sm, cone, plane, float(threshold), int(weighted), weight, int(oracle.rays),
+    decide = [t, problem.surfels, sm, tree.cone, tree.plane, float(threshold), int(weighted), weight, int(oracle.rays),
               int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides)]
     root = _canonical_root(tree)
     grain = 1 if dev.is_cuda else GRAIN
@@ -1129,15 +1081,11 @@ def _regions(room: list, count: int) -> np.ndarray | None:
 def _stack_cap(tree) -> int:
     """Pairs a depth-first run's stack can hold at most: each split (one side one level down)
     leaves at most the most pairs a split makes less one on it, over at most twice the tree's
-    levels of splits, plus the seed."""
+    levels of splits, plus the seed. A split makes k or k(k + 1)/2 pairs of a node's k children
+    (``children``: past one-child cells, the first node below with more than one)."""
     nodes = tree.nodes
-    descend = nodes.descend.numpy()
-    inner = descend >= 0
-    if not inner.any():
-        return 2
-    c0 = descend[inner]
-    k = nodes.child_end.numpy()[nodes.parent.numpy()[c0]] - c0
-    most = int(max(k.max() * (k.max() + 1) // 2, 1))
+    k = int(np.max(nodes.child_end.numpy() - nodes.first_child.numpy()))  # leaves: −1 − (−1)
+    most = max(k * (k + 1) // 2, 1)
     return 2 * tree.levels * (most - 1) + 2
 
 
@@ -1322,7 +1270,8 @@ def build(problem, oracle: Oracle, radiance: np.ndarray | None = None) -> Links:
     weight = None if lum is None else weights(tree, lum, problem.contact)
     # a cluster's visibility is sampled over its open leaves: those buried inside a closed
     # surface get their own share at the push (``enclosure``)
-    sm = sampling(tree, lum, SAMPLE_FLOOR, problem.open_fraction.numpy() if oracle.visibility else None)
+    sm = (sampling(tree, lum, SAMPLE_FLOOR, problem.open_fraction.numpy() if oracle.visibility else None)
+          if oracle.rays > 0 else _unsampled(d))
     threshold = float(oracle.threshold)
     traced = [0]
     # Over the budget, the threshold is raised in trial builds without rays (cheap; the links a

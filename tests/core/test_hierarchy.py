@@ -1,5 +1,6 @@
-"""The disk tree: every element is one leaf, nodes bound and summarise their subtrees, the escape
-pointers give a complete depth-first traversal, refit tracks moved vertices like a rebuild."""
+"""The disk tree: every element is one leaf, nodes bound and summarise their subtrees (their normal
+cones and planes too), the escape pointers give a complete depth-first traversal, refit tracks
+moved vertices like a rebuild."""
 import numpy as np
 
 import shapes
@@ -98,6 +99,38 @@ def test_nodes_bound_and_summarise_their_subtrees():
         assert reach.max() <= nrad[node] * (1 + 1e-5) + 1e-6
 
 
+def test_node_cones_hold_their_subtrees_normals_and_planes_their_surfaces():
+    """Each node's normal cone (``Tree.cone``) holds the normals of the leaves below it, and its
+    (thickness, extent) bounds the corners of their fan triangles around its plane and position;
+    a leaf's are exactly its fan's."""
+    els, problem, h = _tree(_scene(0.2))
+    n = els.count
+    leaf_el = h.nodes.element.numpy()[:n]
+    lo, hi = _leaf_ranges(h)
+    cone, plane = h.cone.numpy().astype(np.float64), h.plane.numpy().astype(np.float64)
+    npos, nnrm = h.nodes.position.numpy().astype(np.float64), h.nodes.normal.numpy().astype(np.float64)
+    angle = np.arctan2(np.abs(cone[:, 1]), cone[:, 0])
+    np.testing.assert_allclose(cone[:, 2], np.sqrt(2 * (1 - cone[:, 0])), atol=1e-6)
+    assert (angle[:n] == 0).all()
+    corners = problem.scene.positions[problem.scene.triangles].astype(np.float64)  # [T, 3, 3]
+    offsets, fans = els.fan_offsets, els.fan_triangles
+    thick_seen = 0.0
+    for node in np.concatenate([np.arange(0, n, 97), np.linspace(n, h.count - 1, 60).astype(int)]):
+        elements = leaf_el[lo[node]:hi[node]]
+        leaf_n = nnrm[lo[node]:hi[node]]  # the leaves' own normals
+        tilt = np.arctan2(np.linalg.norm(np.cross(leaf_n, nnrm[node]), axis=1), leaf_n @ nnrm[node])
+        assert tilt.max() <= angle[node] + 1e-5
+        tris = np.concatenate([fans[offsets[e]:offsets[e + 1]] for e in elements])
+        x = corners[tris].reshape(-1, 3) - npos[node]
+        thick, extent = np.abs(x @ nnrm[node]).max(), np.linalg.norm(x, axis=1).max()
+        assert thick <= plane[node, 0] + 1e-5 and extent <= plane[node, 1] + 1e-5
+        if node < n:  # a leaf's are its own fan's
+            np.testing.assert_allclose(plane[node], [thick, extent], rtol=1e-5, atol=1e-6)
+        thick_seen = max(thick_seen, thick)
+    assert thick_seen > 0.01  # the wavy sheet and the ball are not flat: the test can fail
+    assert angle[h.root] > 1.0
+
+
 def test_escape_pointers_give_a_complete_depth_first_traversal():
     _, _, h = _tree(_scene(0.2))
     first, nxt = h.nodes.first_child.numpy(), h.nodes.next.numpy()
@@ -158,3 +191,5 @@ def test_refit_keeps_exact_node_values_for_a_translation():
     np.testing.assert_allclose(_world(problem, h.nodes.position.numpy()),
                                _world(rebuilt, rebuilt.tree.nodes.position.numpy()), atol=1e-5)
     np.testing.assert_allclose(h.nodes.radius.numpy(), rebuilt.tree.nodes.radius.numpy(), atol=1e-5)
+    np.testing.assert_allclose(h.cone.numpy(), rebuilt.tree.cone.numpy(), atol=1e-5)
+    np.testing.assert_allclose(h.plane.numpy(), rebuilt.tree.plane.numpy(), atol=1e-5)

@@ -5,6 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import warp as wp
 
 import shapes
 from radiosity_baker.core import Settings, bake, links
@@ -288,3 +289,83 @@ def test_links_do_not_depend_on_the_number_of_threads(monkeypatch):
         made.append(csr(links.build(problem, hierarchical.oracle(CPU))))
     assert "_depth_first_kernel" in launches
     assert all(np.array_equal(a, b) for a, b in zip(*made))
+
+
+@wp.kernel
+def _pair_need_kernel(p: wp.array(dtype=wp.vec3), n: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.float32),
+                      area: wp.array(dtype=wp.float32), cone: wp.array(dtype=wp.vec3),
+                      reach: wp.array(dtype=wp.float32), sides: int, out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    a = 2 * i
+    b = 2 * i + 1
+    out[i] = links.pair_need(p[a], n[a], r[a], area[a], cone[a], p[b], n[b], r[b], area[b], cone[b], reach[i], sides)
+
+
+def _pair_need_by_angles(pa, na, ra, area_a, cone_a, pb, nb, rb, area_b, cone_b, reach, sides):
+    """pair_need as its docstring states it, in float64 with unit directions and their angles."""
+    v = pb - pa
+    d = np.linalg.norm(v)
+    if d - ra - rb <= 0:
+        return np.ones(3)
+    u = v / d
+
+    def bound(normal, cone, direction, spread):
+        half = np.arccos(cone[0]) + np.arcsin(min(spread, 1.0))  # the cone's and the directions'
+        tilt = np.arccos(np.clip(normal @ direction, -1, 1))
+        return 1.0 if half >= tilt or half > np.pi else np.cos(tilt - half)
+
+    def facing(spread):
+        ca, cb = bound(na, cone_a, u, spread), bound(nb, cone_b, -u, spread)
+        if sides == 2:
+            ca, cb = max(ca, bound(-na, cone_a, u, spread)), max(cb, bound(-nb, cone_b, -u, spread))
+        return ca, cb
+
+    ca, cb = facing((ra + rb) / d)
+    if ca <= 0 or cb <= 0:
+        ca, cb = facing(reach / d)
+        if ca <= 0 or cb <= 0:
+            return np.zeros(3)
+    g_ab = area_b * cb / (np.pi * d * d + area_b)
+    g_ba = area_a * ca / (np.pi * d * d + area_a)
+    return np.array([max(g_ba * cb, g_ab * links.CONE_WEIGHT * cone_a[2]),
+                     max(g_ab * ca, g_ba * links.CONE_WEIGHT * cone_b[2]), 1.0])
+
+
+@pytest.mark.parametrize("sides", [1, 2])
+def test_pair_need_bounds_the_cosines_over_cones_and_spheres_as_its_angles_say(sides):
+    """The oracle's need, written in n·v and v·v (no square root or division on its critical
+    path), equals the bound its docstring states in angles, computed in float64, on random
+    node pairs: the same pairs dropped, linked whole and overlapping, the same needs to float32's
+    precision."""
+    rng = np.random.default_rng(5)
+    m = 3000
+    p = rng.uniform(-2, 2, (2 * m, 3))
+    n = rng.normal(size=(2 * m, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    r = rng.uniform(0, 0.4, 2 * m) * (rng.random(2 * m) < 0.9)  # some points (r = 0, area 0)
+    area = np.pi * r * r * rng.uniform(0.3, 1.0, 2 * m)
+    half = rng.choice([0.0, 0.3, 1.2, 2.5, np.pi], 2 * m) * rng.random(2 * m)
+    cone = np.stack([np.cos(half), np.sin(half), 2 * np.sin(half / 2)], 1)
+    reach = (r[0::2] + r[1::2]) * rng.uniform(1.0, 3.0, m)
+    out = wp.zeros(m, dtype=wp.vec3, device="cpu")
+    f32 = {"dtype": wp.float32, "device": "cpu"}
+    wp.launch(_pair_need_kernel, dim=m, device="cpu",
+              inputs=[wp.array(p, dtype=wp.vec3, device="cpu"), wp.array(n, dtype=wp.vec3, device="cpu"),
+                      wp.array(r, **f32), wp.array(area, **f32), wp.array(cone, dtype=wp.vec3, device="cpu"),
+                      wp.array(reach, **f32), sides, out])
+    got = out.numpy()
+    # the inputs as float32 saw them
+    p, n, r, area, cone, reach = (x.astype(np.float32).astype(np.float64) for x in (p, n, r, area, cone, reach))
+    want = np.array([_pair_need_by_angles(p[2 * i], n[2 * i], r[2 * i], area[2 * i], cone[2 * i], p[2 * i + 1],
+                                          n[2 * i + 1], r[2 * i + 1], area[2 * i + 1], cone[2 * i + 1], reach[i],
+                                          sides) for i in range(m)])
+    same = got[:, 2] == want[:, 2]
+    assert same.mean() > 0.998  # a pair on the edge of facing away may round either way
+    for kind in (0.0, 1.0) if sides == 1 else (1.0,):  # both occur (both faces: none drops)
+        assert (want[:, 2] == kind).sum() > m // 20
+    assert (want[:, 0] == 1.0).sum() > 3  # overlapping spheres
+    # float32 loses digits where a bound nears 0 (a pair near grazing); the angles' form written
+    # with unit vectors in float32 did the same (measured: worst 8·10⁻⁴ relative, 12 of 9000 values
+    # over 10⁻⁴)
+    rel = np.abs(got[same] - want[same]) / np.maximum(np.abs(want[same]), 1e-30)
+    assert rel.max() < 2e-3 and (rel > 1e-4).mean() < 0.005
