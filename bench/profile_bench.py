@@ -44,7 +44,8 @@ sys.path.insert(0, str(BENCH))
 # ("module.") summed into each; what matches none is "other kernels".
 CATEGORIES = {
     # on the CPU most links are made depth first, the oracle and the links' writes in one kernel
-    "oracle (with rays)": ["links._oracle_kernel", "links._depth_first_kernel"],
+    "oracle (with rays)": ["links._oracle_kernel", "links._depth_first_kernel", "links._oracle_geometric_kernel",
+                           "links._depth_first_geometric_kernel"],
     "scan/scatter": ["links.scan", "links._scatter_kernel", "links.concatenate", "links.grow"],
     "sort": ["links._directed_kernel", "links.sort", "links._csr_kernel", "links._count_kernel",
              "links._total_kernel", "links._cursor_kernel", "links._place_kernel"],

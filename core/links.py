@@ -81,14 +81,15 @@ wp.set_module_options({"enable_backward": False, "cpu_compiler_flags": (
     " -mllvm=-slp-recursion-max-depth=4")})
 
 DROP, LINK, SPLIT_A, SPLIT_B, SPLIT_SELF = 0, 1, 2, 3, 4
-# Peak bytes per link (both directions): the pair and its five values while it is made, then two
+# Peak bytes per link (both directions): the pair and its six values while it is made, then two
 # sort keys and values at twice their count, and the CSR entries (sender, transfer, normaliser,
 # visibility) of both directions.
-BYTES_PER_LINK = 88
+BYTES_PER_LINK = 82
 # Bytes per candidate pair in flight: the pair, its decision and values, the next queue.
-BYTES_PER_CANDIDATE = 48
-# Bytes of a link in the arrays it is made in (a, b, four values, two visible fractions).
-LINK_ARRAYS_BYTES = 32
+BYTES_PER_CANDIDATE = 42
+# Bytes of a link in the arrays it is made in (a, b, four values, two visible fractions as bytes:
+# what the CSR keeps of them; as floats the link arrays' fresh pages cost 19 % more faults).
+LINK_ARRAYS_BYTES = 26
 # Brightness weights of the oracle (a node's brightest leaf over the scene's mean radiance) are
 # clamped to [WEIGHT_LOW, WEIGHT_HIGH]; sample leaves are drawn in proportion to area ×
 # (radiance + SAMPLE_FLOOR × the mean), so dim leaves keep some samples.
@@ -670,6 +671,12 @@ def _decide(t: Nodes, s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec3), p
 
 
 @wp.func
+def _visible_bytes(seen: wp.vec3) -> wp.vec2ub:
+    """A link's visible fractions (to a, to b) as ``LinkSet.visible`` keeps them: × 255, rounded."""
+    return wp.vec2ub(wp.uint8(wp.int32(seen[0] * 255.0 + 0.5)), wp.uint8(wp.int32(seen[1] * 255.0 + 0.5)))
+
+
+@wp.func
 def _put_split(t: Nodes, dec: int, a: int, b: int, out_a: wp.array(dtype=wp.int32),
                out_b: wp.array(dtype=wp.int32), o: int) -> int:
     """The pairs a split of (a, b) (decision ``dec``) makes, written to out_a, out_b from o on;
@@ -696,48 +703,75 @@ def _put_split(t: Nodes, dec: int, a: int, b: int, out_a: wp.array(dtype=wp.int3
     return o
 
 
-@wp.kernel
-def _oracle_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
-                   qb: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
-                   cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2), threshold: float,
-                   weighted: int,
-                   weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
-                   decision: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
-                   visible_out: wp.array(dtype=wp.vec2), block_next: wp.array(dtype=wp.int32),
-                   block_links: wp.array(dtype=wp.int32), traced: wp.array(dtype=wp.int32)):
-    """A breadth-first round: each thread takes a block of ``grain`` consecutive candidate pairs of
-    the ``size`` queued. Per candidate: its decision (``_decide``), and for a link its (transfer to
-    a, to b, normaliser to a, to b) and the visible fractions of its transfers. Per block: the
-    pairs it adds to the next queue, its links and the rays it traced (Warp's CPU atomics are not
-    atomic across our threads, so no shared counter)."""
-    block = wp.tid() + offset
-    first = block * grain
-    adds = int(0)
-    made = int(0)
-    block_rays = int(0)
-    for i in range(first, wp.min(first + grain, size)):
-        dec, count, out, seen, ray_count = _decide(t, s, sm, cone, plane, qa[i], qb[i], threshold, weighted,
-                                                   weight, rays, visibility, seed, sides)
-        decision[i] = dec
-        adds += count
-        block_rays += ray_count
-        if dec == LINK:  # what the scatter reads of a link only
-            made += 1
-            values[i] = out
-            visible_out[i] = wp.vec2(seen[0], seen[1])
-    block_next[block] = adds
-    block_links[block] = made
-    traced[block] = block_rays
+def _specialised(geometric: bool) -> tuple:
+    """(KEEP, ONE_FACE, name suffix): what a kernel made for the geometric oracle (no rays, one
+    face: ``Oracle`` with rays 0 and sides 1) or for any passes ``_decide`` as its rays,
+    visibility and sides (rays·KEEP, visibility·KEEP, sides·KEEP + ONE_FACE). As constants (0, 1)
+    they let the compiler drop the samples, rays and back faces from the geometric kernels, which
+    then make the same links in less time (room20k's link build 88 → 64 ms on the 2-core VM);
+    a second call site in one kernel instead slowed the oracle with rays by ~5 %."""
+    return (0, 1, "_geometric") if geometric else (1, 0, "")
+
+
+def _geometric(oracle: Oracle) -> bool:
+    """Whether ``oracle`` is the geometric one (no rays, one face): see ``_specialised``."""
+    return oracle.rays == 0 and oracle.sides == 1
+
+
+def _oracle_kernel_for(geometric: bool):
+    """The breadth-first oracle kernel for the geometric oracle or any (``_specialised``)."""
+    KEEP, ONE_FACE, suffix = _specialised(geometric)
+
+    @wp.kernel(name=f"_oracle{suffix}_kernel")
+    def kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
+               qb: wp.array(dtype=wp.int32), t: Nodes, s: Surfels, sm: Sampling,
+               cone: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec2), threshold: float,
+               weighted: int,
+               weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
+               decision: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
+               visible_out: wp.array(dtype=wp.vec2ub), block_next: wp.array(dtype=wp.int32),
+               block_links: wp.array(dtype=wp.int32), traced: wp.array(dtype=wp.int32)):
+        """A breadth-first round: each thread takes a block of ``grain`` consecutive candidate pairs of
+        the ``size`` queued. Per candidate: its decision (``_decide``), and for a link its (transfer to
+        a, to b, normaliser to a, to b) and the visible fractions of its transfers. Per block: the
+        pairs it adds to the next queue, its links and the rays it traced (Warp's CPU atomics are not
+        atomic across our threads, so no shared counter)."""
+        block = wp.tid() + offset
+        first = block * grain
+        adds = int(0)
+        made = int(0)
+        block_rays = int(0)
+        for i in range(first, wp.min(first + grain, size)):
+            a = qa[i]
+            b = qb[i]
+            dec, count, out, seen, ray_count = _decide(t, s, sm, cone, plane, a, b, threshold, weighted,
+                                                       weight, rays * KEEP, visibility * KEEP, seed,
+                                                       sides * KEEP + ONE_FACE)
+            decision[i] = dec
+            adds += count
+            block_rays += ray_count
+            if dec == LINK:  # what the scatter reads of a link only
+                made += 1
+                values[i] = out
+                visible_out[i] = _visible_bytes(seen)
+        block_next[block] = adds
+        block_links[block] = made
+        traced[block] = block_rays
+
+    return kernel
+
+
+_ORACLE_KERNELS = {geometric: _oracle_kernel_for(geometric) for geometric in (False, True)}
 
 
 @wp.kernel
 def _scatter_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.int32),
                     qb: wp.array(dtype=wp.int32), t: Nodes, decision: wp.array(dtype=wp.int32),
                     next_offset: wp.array(dtype=wp.int32), link_offset: wp.array(dtype=wp.int32),
-                    values: wp.array(dtype=wp.vec4), visible_in: wp.array(dtype=wp.vec2), base: int,
+                    values: wp.array(dtype=wp.vec4), visible_in: wp.array(dtype=wp.vec2ub), base: int,
                     next_a: wp.array(dtype=wp.int32), next_b: wp.array(dtype=wp.int32),
                     la: wp.array(dtype=wp.int32), lb: wp.array(dtype=wp.int32),
-                    lvalues: wp.array(dtype=wp.vec4), lvisible: wp.array(dtype=wp.vec2)):
+                    lvalues: wp.array(dtype=wp.vec4), lvisible: wp.array(dtype=wp.vec2ub)):
     """Block k of the oracle's blocks: its candidates' links (after the ``base`` links of earlier
     rounds) and their pairs of the next queue, in order from the block's scanned offsets."""
     block = wp.tid() + offset
@@ -760,64 +794,74 @@ def _scatter_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.in
 DONE, FULL, DEEP = 0, 1, 2
 
 
-@wp.kernel
-def _depth_first_kernel(offset: int, runs: wp.array(dtype=wp.int32), seeds_a: wp.array(dtype=wp.int32),
-                        seeds_b: wp.array(dtype=wp.int32), seed_next: wp.array(dtype=wp.int32),
-                        seed_end: wp.array(dtype=wp.int32), stack_a: wp.array(dtype=wp.int32),
-                        stack_b: wp.array(dtype=wp.int32), stack_top: wp.array(dtype=wp.int32),
-                        stack_cap: int, region: wp.array(dtype=wp.vec2i), status: wp.array(dtype=wp.int32),
-                        t: Nodes, s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec3),
-                        plane: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
-                        weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
-                        traced: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
-                        lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
-                        lvisible: wp.array(dtype=wp.vec2)):
-    """Run ``runs[k]``: the links below its seeds (seed_next … seed_end − 1 of seeds_a, seeds_b),
-    made depth first from its own stack (stack_cap pairs from run × stack_cap; stack_top pairs on
-    it) into its own region [start, end) of the link arrays, with no candidate arrays, scans or
-    rounds between. Stops when done, or when its region is full (the pair it could not place back
-    on its stack: a later launch goes on with a new region). region[run] becomes the part it
-    filled; seed_next, stack_top and traced (rays, added) are kept for that launch."""
-    run = runs[wp.tid() + offset]
-    base = run * stack_cap
-    top = stack_top[run]
-    next_seed = seed_next[run]
-    j = region[run][0]
-    end = region[run][1]
-    state = DONE
-    run_rays = int(0)
-    while top > 0 or next_seed < seed_end[run]:
-        if top == 0:
-            stack_a[base] = seeds_a[next_seed]
-            stack_b[base] = seeds_b[next_seed]
-            next_seed += 1
-            top = 1
-        top -= 1
-        a = stack_a[base + top]
-        b = stack_b[base + top]
-        if j == end:  # no room for a link of this pair: a later launch takes it from here
-            top += 1
-            state = FULL
-            break
-        dec, count, out, seen, ray_count = _decide(t, s, sm, cone, plane, a, b, threshold, weighted, weight,
-                                                   rays, visibility, seed, sides)
-        run_rays += ray_count
-        if dec == LINK:
-            la[j] = a
-            lb[j] = b
-            lvalues[j] = out
-            lvisible[j] = wp.vec2(seen[0], seen[1])
-            j += 1
-        elif dec != DROP:
-            if top + count > stack_cap:
-                state = DEEP
+def _depth_first_kernel_for(geometric: bool):
+    """The depth-first kernel for the geometric oracle or any (``_specialised``)."""
+    KEEP, ONE_FACE, suffix = _specialised(geometric)
+
+    @wp.kernel(name=f"_depth_first{suffix}_kernel")
+    def kernel(offset: int, runs: wp.array(dtype=wp.int32), seeds_a: wp.array(dtype=wp.int32),
+               seeds_b: wp.array(dtype=wp.int32), seed_next: wp.array(dtype=wp.int32),
+               seed_end: wp.array(dtype=wp.int32), stack_a: wp.array(dtype=wp.int32),
+               stack_b: wp.array(dtype=wp.int32), stack_top: wp.array(dtype=wp.int32),
+               stack_cap: int, region: wp.array(dtype=wp.vec2i), status: wp.array(dtype=wp.int32),
+               t: Nodes, s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec3),
+               plane: wp.array(dtype=wp.vec2), threshold: float, weighted: int,
+               weight: wp.array(dtype=wp.float32), rays: int, visibility: int, seed: int, sides: int,
+               traced: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
+               lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
+               lvisible: wp.array(dtype=wp.vec2ub)):
+        """Run ``runs[k]``: the links below its seeds (seed_next … seed_end − 1 of seeds_a, seeds_b),
+        made depth first from its own stack (stack_cap pairs from run × stack_cap; stack_top pairs on
+        it) into its own region [start, end) of the link arrays, with no candidate arrays, scans or
+        rounds between. Stops when done, or when its region is full (the pair it could not place back
+        on its stack: a later launch goes on with a new region). region[run] becomes the part it
+        filled; seed_next, stack_top and traced (rays, added) are kept for that launch."""
+        run = runs[wp.tid() + offset]
+        base = run * stack_cap
+        top = stack_top[run]
+        next_seed = seed_next[run]
+        j = region[run][0]
+        end = region[run][1]
+        state = DONE
+        run_rays = int(0)
+        while top > 0 or next_seed < seed_end[run]:
+            if top == 0:
+                stack_a[base] = seeds_a[next_seed]
+                stack_b[base] = seeds_b[next_seed]
+                next_seed += 1
+                top = 1
+            top -= 1
+            a = stack_a[base + top]
+            b = stack_b[base + top]
+            if j == end:  # no room for a link of this pair: a later launch takes it from here
+                top += 1
+                state = FULL
                 break
-            top = _put_split(t, dec, a, b, stack_a, stack_b, base + top) - base
-    region[run] = wp.vec2i(region[run][0], j)
-    stack_top[run] = top
-    seed_next[run] = next_seed
-    status[run] = state
-    traced[run] += run_rays
+            dec, count, out, seen, ray_count = _decide(t, s, sm, cone, plane, a, b, threshold, weighted,
+                                                       weight, rays * KEEP, visibility * KEEP, seed,
+                                                       sides * KEEP + ONE_FACE)
+            run_rays += ray_count
+            if dec == LINK:
+                la[j] = a
+                lb[j] = b
+                lvalues[j] = out
+                lvisible[j] = _visible_bytes(seen)
+                j += 1
+            elif dec != DROP:
+                if top + count > stack_cap:
+                    state = DEEP
+                    break
+                top = _put_split(t, dec, a, b, stack_a, stack_b, base + top) - base
+        region[run] = wp.vec2i(region[run][0], j)
+        stack_top[run] = top
+        seed_next[run] = next_seed
+        status[run] = state
+        traced[run] += run_rays
+
+    return kernel
+
+
+_DEPTH_FIRST_KERNELS = {geometric: _depth_first_kernel_for(geometric) for geometric in (False, True)}
 
 
 @wp.kernel
@@ -834,7 +878,7 @@ def _directed_kernel(offset: int, la: wp.array(dtype=wp.int32), lb: wp.array(dty
 @wp.kernel
 def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
                 values: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32), lb: wp.array(dtype=wp.int32),
-                lvalues: wp.array(dtype=wp.vec4), lvisible: wp.array(dtype=wp.vec2), out: LinkSet):
+                lvalues: wp.array(dtype=wp.vec4), lvisible: wp.array(dtype=wp.vec2ub), out: LinkSet):
     """Sorted directed link j: its sender, transfer and form factor; row starts where the
     receiver changes."""
     j = wp.tid() + offset
@@ -849,7 +893,7 @@ def _csr_kernel(offset: int, count: int, m: int, keys: wp.array(dtype=wp.int32),
         out.sender[j] = la[i]
         out.transfer[j] = x[1]
         out.form_factor[j] = x[3]
-    out.visible[j] = wp.uint8(wp.int32(lvisible[i][v % 2] * 255.0 + 0.5))
+    out.visible[j] = lvisible[i][v % 2]
     r = keys[j]
     prev = int(-1)
     if j > 0:
@@ -945,7 +989,7 @@ def _canonical_root(tree) -> int:
 
 
 def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, traced: list):
-    """One top-down build at ``threshold``: the link arrays (int32 a, b, vec4 values, vec2 visible
+    """One top-down build at ``threshold``: the link arrays (int32 a, b, vec4 values, vec2ub visible
     fractions: device arrays), the segments [start, end) of them that hold links, in order, and
     the breadth-first rounds taken; or None when the budget was exceeded on the way. ``traced[0]``
     counts the rays traced.
@@ -976,10 +1020,10 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
         blocks = -(-q // grain)
         decision = wp.empty(q, dtype=wp.int32, device=d)
         values = wp.empty(q, dtype=wp.vec4, device=d)
-        seen = wp.empty(q, dtype=wp.vec2, device=d)
+        seen = wp.empty(q, dtype=wp.vec2ub, device=d)
         block_next, block_links, rays, next_offset, link_offset = (
             wp.empty(blocks, dtype=wp.int32, device=d) for _ in range(5))
-        device_mod.launch(_oracle_kernel, blocks,
+        device_mod.launch(_ORACLE_KERNELS[_geometric(oracle)], blocks,
                           [grain, q, qa, qb, *decide, decision, values, seen, block_next, block_links, rays],
                           dev, chunks=max(1, min(16, q // 262144)), on_chunk=lambda f: stages.check(),
                           uneven=True, min_split=SPLIT_ORACLE)
@@ -1038,7 +1082,7 @@ def _depth_first(problem, oracle: Oracle, decide: list, qa: wp.array, qb: wp.arr
             return None
         runs, waiting = pending[:len(regions)], pending[len(regions):]
         region.numpy()[runs] = regions
-        device_mod.launch(_depth_first_kernel, runs.size,
+        device_mod.launch(_DEPTH_FIRST_KERNELS[_geometric(oracle)], runs.size,
                           [wp.array(runs, dtype=wp.int32, device=d), qa, qb, seed_next, seed_end, stack_a,
                            stack_b, stack_top, cap, region, status, *decide, rays, *found],
                           dev, chunks=1 if oracle.rays == 0 else DEPTH_WAVES,
@@ -1090,7 +1134,7 @@ def _stack_cap(tree) -> int:
 
 
 def _link_buffers(problem, oracle: Oracle) -> list:
-    """Where a build's links go as they are made (int32 a, b, vec4 values, vec2 visible): on the
+    """Where a build's links go as they are made (int32 a, b, vec4 values, vec2ub visible): on the
     CPU room for as many as the budget allows — memory the operating system hands out only where
     it is written, so each round writes its links in place (no copies: 39 ms of a 100 k-element
     room's 0.56 s went to joining its rounds' links) —, on a GPU a start grown as needed."""
@@ -1099,7 +1143,7 @@ def _link_buffers(problem, oracle: Oracle) -> list:
     if not dev.is_cuda:
         available = device_mod.free_memory(dev) or 0
         count = max(count, min(oracle.budget // BYTES_PER_LINK, available // LINK_ARRAYS_BYTES))
-    return [wp.empty(count, dtype=dt, device=dev.name) for dt in (wp.int32, wp.int32, wp.vec4, wp.vec2)]
+    return [wp.empty(count, dtype=dt, device=dev.name) for dt in (wp.int32, wp.int32, wp.vec4, wp.vec2ub)]
 
 
 def _grown(arrays: list, need: int, keep: int) -> list:
@@ -1179,7 +1223,7 @@ def _cursor_kernel(offset: int, runs: int, m: int, offsets: wp.array(dtype=wp.in
 def _place_kernel(offset: int, run: int, pairs: int, m: int, seg_start: wp.array(dtype=wp.int32),
                   seg_rank: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
                   lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
-                  lvisible: wp.array(dtype=wp.vec2), cursor: wp.array(dtype=wp.int32), out: LinkSet):
+                  lvisible: wp.array(dtype=wp.vec2ub), cursor: wp.array(dtype=wp.int32), out: LinkSet):
     """Run t's directed links (as ``_count_kernel``), in order, at their receivers' next places
     (``cursor``: row t of ``_cursor_kernel``'s places, advanced as they fill): sender, transfer,
     normaliser, visible."""
@@ -1200,19 +1244,19 @@ def _place_kernel(offset: int, run: int, pairs: int, m: int, seg_start: wp.array
 
 @wp.func
 def _place(out: LinkSet, cursor: wp.array(dtype=wp.int32), slot: int, sender: int, transfer: float,
-           form_factor: float, visible: float):
+           form_factor: float, visible: wp.uint8):
     """One directed link at its receiver's next place (``cursor[slot]``, then advanced)."""
     j = cursor[slot]
     cursor[slot] = j + 1
     out.sender[j] = sender
     out.transfer[j] = transfer
     out.form_factor[j] = form_factor
-    out.visible[j] = wp.uint8(wp.int32(visible * 255.0 + 0.5))
+    out.visible[j] = visible
 
 
 def _by_receiver(dev, n: int, found: list, segments: list) -> LinkSet:
     """Both directions of the links in ``segments`` ([start, end) pieces, in order) of ``found``
-    (int32 node pairs a, b, vec4 values, vec2 visible fractions; see ``_scatter_kernel``) sorted
+    (int32 node pairs a, b, vec4 values, vec2ub visible fractions × 255; see ``_scatter_kernel``) sorted
     by receiver into the ``LinkSet`` over n nodes; a receiver's links in the order of the
     directed links, 2i (receiver a[i]) and 2i + 1 (b[i]), i in segment order.
 

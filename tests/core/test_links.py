@@ -228,7 +228,7 @@ def test_a_profile_times_each_kernel_of_a_link_build_and_nothing_when_off():
     with device.profiling() as table:
         made = links.build(problem, links.Oracle(threshold=0.1))
     rows = table.as_dict()
-    assert rows["links._oracle_kernel"]["calls"] == made.rounds
+    assert rows["links._oracle_geometric_kernel"]["calls"] == made.rounds
     assert rows["links._scatter_kernel"]["calls"] == made.rounds
     assert rows["links._place_kernel"]["calls"] == 1
     assert {"links.scan", "links.sort", "links._count_kernel", "links._cursor_kernel"} <= set(rows)
@@ -260,6 +260,25 @@ def test_depth_first_links_are_the_breadth_first_ones_even_when_runs_outgrow_the
     assert launches.count("_depth_first_kernel") > 1 and deep.threshold == oracle.threshold
     assert deep.pairs == wide.pairs and deep.rays_traced == wide.rays_traced
     (r0, x0), (r1, x1) = rows(wide), rows(deep)
+    assert np.array_equal(r0, r1) and all(np.array_equal(a, b) for a, b in zip(x0, x1))
+
+
+@pytest.mark.parametrize("depth_first", [64, 10 ** 9])
+def test_kernels_made_for_the_geometric_oracle_make_its_links_as_the_general_ones_do(monkeypatch, depth_first):
+    """The oracle without rays on one face runs kernels compiled for it (``links._specialised``):
+    the same links with the same values as the kernels for any oracle, depth and breadth first."""
+    problem = Problem(box_room(10), CPU)
+    oracle = links.Oracle(threshold=0.02)
+    monkeypatch.setattr(links, "DEPTH_FIRST", depth_first)
+    launches = count_launches(monkeypatch)
+    fast = links.build(problem, oracle)
+    assert "_oracle_geometric_kernel" in launches and "_oracle_kernel" not in launches
+    monkeypatch.setattr(links, "_geometric", lambda oracle: False)
+    general = links.build(problem, oracle)
+    assert "_oracle_kernel" in launches
+    assert ("_depth_first_kernel" in launches) == (depth_first == 64)
+    assert fast.pairs == general.pairs > 10_000
+    (r0, x0), (r1, x1) = rows(fast), rows(general)
     assert np.array_equal(r0, r1) and all(np.array_equal(a, b) for a, b in zip(x0, x1))
 
 
