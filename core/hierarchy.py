@@ -220,7 +220,8 @@ def _merge_kernel(offset: int, node0: int, level_end: int, child_level_end: int,
         cc = cone[c]
         nc = n_nrm[c]
         # the child's half-angle back from its cone (|sin|: float32's sin(π) is below 0)
-        angle = wp.max(angle, wp.acos(wp.clamp(wp.dot(n, nc), -1.0, 1.0)) + wp.atan2(wp.abs(cc[1]), cc[0]))
+        child = wp.atan2(wp.abs(cc[1]), cc[0])
+        angle = wp.max(angle, wp.acos(wp.clamp(wp.dot(n, nc), -1.0, 1.0)) + child)
         # a child's point x = its centre + w, |w| ≤ its extent, |w·n_c| ≤ its thickness
         x = n_pos[c] - centre
         pc = plane[c]

@@ -286,8 +286,8 @@ def pair_need(pa: wp.vec3, na: wp.vec3, ra: float, area_a: float, cone_a: wp.vec
     if cosines[0] <= 0.0 or cosines[1] <= 0.0:
         # the disks face away; the surfaces around them may not
         rs = wp.min(reach, wp.sqrt(d2))
-        cosines = facing(dn_a, cone_a, dn_b, cone_b, d2, inv_d2, wp.vec2(wp.sqrt(wp.max(d2 - rs * rs, 0.0)), rs),
-                         sides)
+        beta = wp.vec2(wp.sqrt(wp.max(d2 - rs * rs, 0.0)), rs)
+        cosines = facing(dn_a, cone_a, dn_b, cone_b, d2, inv_d2, beta, sides)
         if cosines[0] <= 0.0 or cosines[1] <= 0.0:
             return wp.vec3(0.0, 0.0, 0.0)
     ca = cosines[0]
@@ -678,7 +678,8 @@ def _decide(t: Nodes, s: Surfels, sm: Sampling, cone: wp.array(dtype=wp.vec3), p
 @wp.func
 def _visible_bytes(seen: wp.vec3) -> wp.vec2ub:
     """A link's visible fractions (to a, to b) as ``LinkSet.visible`` keeps them: × 255, rounded."""
-    return wp.vec2ub(wp.uint8(wp.int32(seen[0] * 255.0 + 0.5)), wp.uint8(wp.int32(seen[1] * 255.0 + 0.5)))
+    return wp.vec2ub(wp.uint8(wp.int32(seen[0] * 255.0 + 0.5)),
+                     wp.uint8(wp.int32(seen[1] * 255.0 + 0.5)))
 
 
 @wp.func
@@ -736,11 +737,11 @@ def _oracle_kernel_for(geometric: bool):
                decision: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.vec4),
                visible_out: wp.array(dtype=wp.vec2ub), block_next: wp.array(dtype=wp.int32),
                block_links: wp.array(dtype=wp.int32), traced: wp.array(dtype=wp.int32)):
-        """A breadth-first round: each thread takes a block of ``grain`` consecutive candidate pairs of
-        the ``size`` queued. Per candidate: its decision (``_decide``), and for a link its (transfer to
-        a, to b, normaliser to a, to b) and the visible fractions of its transfers. Per block: the
-        pairs it adds to the next queue, its links and the rays it traced (Warp's CPU atomics are not
-        atomic across our threads, so no shared counter)."""
+        """A breadth-first round: each thread takes a block of ``grain`` consecutive candidate pairs
+        of the ``size`` queued. Per candidate: its decision (``_decide``), and for a link its
+        (transfer to a, to b, normaliser to a, to b) and the visible fractions of its transfers. Per
+        block: the pairs it adds to the next queue, its links and the rays it traced (Warp's CPU
+        atomics are not atomic across our threads, so no shared counter)."""
         block = wp.tid() + offset
         first = block * grain
         adds = int(0)
@@ -794,8 +795,8 @@ def _scatter_kernel(offset: int, grain: int, size: int, qa: wp.array(dtype=wp.in
             o = _put_split(t, dec, qa[i], qb[i], next_a, next_b, o)
 
 
-# What a depth-first run (``_depth_first_kernel``) ends with: all its seeds done, its region of the
-# link arrays full, its stack full (a bound that cannot be reached; see ``_depth_first``).
+# What a depth-first run (``_depth_first_kernel_for``) ends with: all its seeds done, its region of
+# the link arrays full, its stack full (a bound that cannot be reached; see ``_depth_first``).
 DONE, FULL, DEEP = 0, 1, 2
 
 
@@ -815,12 +816,13 @@ def _depth_first_kernel_for(geometric: bool):
                traced: wp.array(dtype=wp.int32), la: wp.array(dtype=wp.int32),
                lb: wp.array(dtype=wp.int32), lvalues: wp.array(dtype=wp.vec4),
                lvisible: wp.array(dtype=wp.vec2ub)):
-        """Run ``runs[k]``: the links below its seeds (seed_next … seed_end − 1 of seeds_a, seeds_b),
-        made depth first from its own stack (stack_cap pairs from run × stack_cap; stack_top pairs on
-        it) into its own region [start, end) of the link arrays, with no candidate arrays, scans or
-        rounds between. Stops when done, or when its region is full (the pair it could not place back
-        on its stack: a later launch goes on with a new region). region[run] becomes the part it
-        filled; seed_next, stack_top and traced (rays, added) are kept for that launch."""
+        """Run ``runs[k]``: the links below its seeds (seed_next … seed_end − 1 of seeds_a,
+        seeds_b), made depth first from its own stack (stack_cap pairs from run × stack_cap;
+        stack_top pairs on it) into its own region [start, end) of the link arrays, with no
+        candidate arrays, scans or rounds between. Stops when done, or when its region is full (the
+        pair it could not place back on its stack: a later launch goes on with a new region).
+        region[run] becomes the part it filled; seed_next, stack_top and traced (rays, added) are
+        kept for that launch."""
         run = runs[wp.tid() + offset]
         base = run * stack_cap
         top = stack_top[run]
@@ -866,7 +868,8 @@ def _depth_first_kernel_for(geometric: bool):
     return kernel
 
 
-_DEPTH_FIRST_KERNELS = {geometric: _depth_first_kernel_for(geometric) for geometric in (False, True)}
+_DEPTH_FIRST_KERNELS = {geometric: _depth_first_kernel_for(geometric)
+                        for geometric in (False, True)}
 
 
 @wp.kernel
@@ -1007,8 +1010,8 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
     weighted = weight is not None
     if weight is None:
         weight = wp.zeros(1, dtype=wp.float32, device=d)
-    decide = [t, problem.surfels, sm, tree.cone, tree.plane, float(threshold), int(weighted), weight, int(oracle.rays),
-              int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides)]
+    decide = [t, problem.surfels, sm, tree.cone, tree.plane, float(threshold), int(weighted), weight,
+              int(oracle.rays), int(oracle.visibility), int(oracle.seed) + 7919, int(oracle.sides)]
     root = _canonical_root(tree)
     grain = 1 if dev.is_cuda else GRAIN
     qa = wp.full(1, root, dtype=wp.int32, device=d)
@@ -1056,7 +1059,8 @@ def _create(problem, oracle: Oracle, threshold: float, sm: Sampling, weight, tra
 def _depth_first(problem, oracle: Oracle, decide: list, qa: wp.array, qb: wp.array, found: list,
                  total: int, traced: list):
     """The links below the queued pairs qa, qb (int32[q]) on the CPU, depth first
-    (``_depth_first_kernel``): the queue cut into runs (``_run_count``), taken in turn by the threads;
+    (``_depth_first_kernel_for``): the queue cut into runs (``_run_count``), taken in turn by the
+    threads;
     each run writes its links to its own region of ``found`` (after the ``total`` made so far), an
     equal share of the room the budget leaves. A run whose region fills up goes on in a
     later launch, in the largest room then left. Returns ``found`` and the segments [start, end)
@@ -1094,7 +1098,8 @@ def _depth_first(problem, oracle: Oracle, decide: list, qa: wp.array, qb: wp.arr
                           on_chunk=lambda f: stages.check(), one_by_one=True)
         state = status.numpy()[runs]
         if (state == DEEP).any():
-            raise RuntimeError("links: a depth-first run outgrew its stack (a bug: it is sized for the deepest walk)")
+            raise RuntimeError("links: a depth-first run outgrew its stack (a bug: it is sized for the "
+                               "deepest walk)")
         filled = region.numpy()[runs]
         for run, (start, end), (_, used) in zip(runs, regions, filled):
             parts[run].append((int(start), int(used)))
@@ -1299,7 +1304,8 @@ def _by_receiver(dev, n: int, found: list, segments: list) -> LinkSet:
     starts = np.array([start for start, _ in segments] or [0], np.int32)
     ranks = np.concatenate([[0], np.cumsum([end - start for start, end in segments], dtype=np.int64)])
     seg_start = wp.array(starts, dtype=wp.int32, device=d)
-    seg_rank = wp.array(ranks.astype(np.int32) if len(segments) else np.zeros(2, np.int32), dtype=wp.int32, device=d)
+    seg_rank = wp.array(ranks.astype(np.int32) if len(segments) else np.zeros(2, np.int32), dtype=wp.int32,
+                        device=d)
     runs = dev.threads
     run = max(1, -(-pairs // runs))
     counts = wp.zeros(runs * n, dtype=wp.int32, device=d)  # [run, receiver], then where each run's links go
