@@ -33,9 +33,12 @@ _load_lock = threading.RLock()
 # device line (``Device.description``) says it in our words instead.
 _NO_DRIVER = "Could not find or load the NVIDIA CUDA driver"
 # The package's modules that hold kernels (relative to this package), loaded by load_kernels.
-KERNEL_MODULES = ("direct", "hierarchy", "gather", "solvers.base", "solvers.reference", "links",
-                  "solvers.hierarchical", "directions", "solvers.implicit", "solvers.antiradiance",
-                  "lightmap.raster")
+# Every module with a kernel is listed (tests/core/test_launch.py checks), so that the set-up's
+# ``compile-kernels`` leaves the first bake nothing to compile.
+KERNEL_MODULES = ("direct", "hierarchy", "gather", "surfels", "hits", "enclosure", "refine",
+                  "solvers.base", "solvers.reference", "links", "solvers.hierarchical",
+                  "directions", "solvers.implicit", "solvers.antiradiance", "lightmap.raster",
+                  "targets.probes")
 
 
 def init_warp() -> None:

@@ -2,10 +2,10 @@
 through the directional one (right), side by side.
 
 A 2 m wall (bumped by a noise height field through a Bump node) between a warm lamp grazing
-from the left and a cool one from the right is baked with ``--directional sh`` (direct light). For
+from the left and a cool one from the right is baked with ``--directional sh`` (default method: hierarchical radiosity). For
 the picture, each copy of the wall shows albedo × lighting as emission, Cycles renders with no
-bounces: left ``lighting = L0``; right ``lighting = L0 + L1 · (n' − n)`` per channel (README,
-"Directional lightmaps and light probes"), n' the bumped normal, n the wall's. Nothing is saved.
+bounces: left ``lighting = L0``; right ``lighting = L0 + L1 · (n' − n)`` per channel (manual,
+docs/directional-probes.md), n' the bumped normal, n the wall's. Nothing is saved.
 
     .venv/bin/python sample_blends/render_directional.py
 """
@@ -109,8 +109,7 @@ def main() -> None:
     lamp("Warm", (-2.2, -0.3, 1.4), (1.0, 0.55, 0.25), 250.0)
     lamp("Cool", (2.2, -0.3, 0.7), (0.25, 0.5, 1.0), 250.0)
     out = Path(tempfile.mkdtemp(prefix="rb-directional-"))
-    settings = Settings(method="direct", target="lightmap", output=str(out), texel_density=96.0,
-                        directional="sh", light_samples=16)
+    settings = Settings(target="lightmap", output=str(out), texel_density=96.0, directional="sh")
     for w in BakeJob(settings).run_sync(bpy.context):
         print("warning:", w)
     sh = files.read_exr(out / "Lightmap.sh.exr")

@@ -1,7 +1,7 @@
 """Render ``cornell_lightmap.png``: the Cornell box shown through its baked lightmap alone.
 
 Bakes the ``combined`` content (emission + albedo × lighting) of every mesh into one atlas with the
-reference solver and hooks it up (``--hookup``); then, for the picture only, each material shows
+default method (hierarchical radiosity) and hooks it up (``--hookup``); then, for the picture only, each material shows
 the lightmap as emission and Cycles renders with no bounces, so every pixel is the lightmap's value.
 The .blend file is not changed.
 
@@ -24,7 +24,7 @@ HERE = Path(__file__).resolve().parent
 def main() -> None:
     bpy.ops.wm.open_mainfile(filepath=str(HERE / "cornell_box.blend"))
     out = Path(tempfile.mkdtemp(prefix="rb-lightmaps-"))
-    settings = Settings(method="reference", target="lightmap", content="combined", output=str(out),
+    settings = Settings(target="lightmap", content="combined", output=str(out),
                         texel_density=256.0, max_size=512, hookup="node")
     warnings = BakeJob(settings).run_sync(bpy.context)
     for w in warnings:

@@ -1,5 +1,5 @@
-"""Write ``screenshot.png`` (README, "Using the bake in an engine"): the sample Cornell box baked
-into an RGBM lightmap, exported as a GLB and shown by this folder's three.js page in headless
+"""Write ``screenshot.png`` (manual, docs/engines.md): the sample Cornell box baked
+at the defaults (hierarchical radiosity) into an RGBM lightmap, exported as a GLB and shown by this folder's three.js page in headless
 Chromium (``headless``). Run by hand; needs what the browser test needs (``npm ci`` here, Debian's
 chromium):
 
@@ -32,8 +32,7 @@ def main() -> int:
         return 1
     with tempfile.TemporaryDirectory(prefix="rb-screenshot-") as temp:
         site = headless.make_site(Path(temp) / "site")
-        if cli.main(["bake", str(CORNELL), "--method", "bunnell", "--samples", "16", "--target",
-                     "lightmap", "--texel-density", "16", "--output", str(Path(temp) / "maps"),
+        if cli.main(["bake", str(CORNELL), "--target", "lightmap", "--output", str(Path(temp) / "maps"),
                      "--lightmap-format", "rgbm", "--gltf", str(site / "cornell_box.glb")]) != 0:
             return 1
         shot = headless.screenshot(site, Path(temp) / "shot.png", size)
