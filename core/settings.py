@@ -2,8 +2,8 @@
 
 The dataclass :class:`Settings` is what core reads. Each field's metadata (:class:`Option`) is the
 one source the Blender PropertyGroup (``addon/props.py``), the command line (``addon/cli.py``), the
-panel (which greys out what the chosen method does not read) and README's options table
-(:func:`options_markdown`, checked by a test) are made from. Fields are grouped by who reads them:
+panel (which greys out what the chosen method does not read) and the manual's settings reference
+(:func:`reference_page`, checked by a test) are made from. Fields are grouped by who reads them:
 ``solver`` (light transport), ``lightmap`` (texels, pages, files) and ``output`` (what is written
 and how).
 """
@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field, fields
+from pathlib import Path
 from typing import Optional
 
 from .errors import SettingsError
@@ -247,7 +248,7 @@ class Settings:
                                "<page>.sh.exr; godot: Godot 4's four L1 layers stacked in "
                                "<page>.godot.exr; unity: Unity's direction map <page>.dir.png "
                                "beside the plain page (its colour map); none: the plain lightmap "
-                               "alone (README: Directional lightmaps)", "lightmap",
+                               "alone (manual: Directional lightmaps)", "lightmap",
                                choices=DIRECTIONAL)
     probes: str = _option("none", "Light Probes", "light probes for objects that move through the "
                           "baked scene: grid bakes the L2 spherical harmonics of the light arriving "
@@ -387,19 +388,50 @@ def describe(name: str) -> str:
     return text
 
 
-def options_markdown() -> str:
-    """README's table of the settings' command-line options: flag, meaning, default."""
-    rows = ["| option | meaning (default) |", "| --- | --- |"]
+GROUP_TITLES = {"solver": "How the light is computed", "output": "What is baked, where and when",
+                "lightmap": "Lightmaps"}
+REFERENCE_PAGE = "docs/settings.md"  # the manual's page this module writes (reference_page)
+
+
+def options_markdown(group: Optional[str] = None) -> str:
+    """The table of the settings (of ``group``, else all): command-line option, panel label,
+    meaning with range, default."""
+    rows = ["| option | panel | meaning (default) |", "| --- | --- | --- |"]
     for f in fields(Settings):
         opt = option(f.name)
+        if group is not None and opt.group != group:
+            continue
         shown = flag(f.name)
         if opt.choices is not None:
             shown += " " + "\\|".join(opt.choices)
         elif metavar(f.name):
             shown += " " + metavar(f.name)
         default = "off" if isinstance(f.default, bool) else f"`{f.default}`"
-        rows.append(f"| `{shown}` | {describe(f.name)} ({default}) |")
+        rows.append(f"| `{shown}` | {opt.label} | {describe(f.name)} ({default}) |")
     return "\n".join(rows)
+
+
+def reference_page() -> str:
+    """The manual's settings reference (``REFERENCE_PAGE``), made from the fields above; a test
+    checks the committed page is this; ``write_reference_page`` writes it."""
+    head = ["# Settings reference", "",
+            "Every setting of a bake, as the command line spells it (`bake` options), with its "
+            "label in the panel (Properties › Render › Radiosity Bake) and in `core.Settings` "
+            "(the field is the option without `--`, `-` as `_`). This page is generated from "
+            "`core/settings.py`; do not edit it by hand "
+            "([Development](development.md#settings)). A setting a method does not read is "
+            "greyed out in the panel and ignored on the command line.", ""]
+    body = []
+    for group in GROUPS:
+        body += [f"## {GROUP_TITLES[group]}", "", options_markdown(group), ""]
+    return "\n".join(head + body)
+
+
+def write_reference_page() -> Path:
+    """Write ``reference_page()`` over ``REFERENCE_PAGE`` in this checkout; returns its path."""
+    target = Path(__file__).resolve().parents[1] / REFERENCE_PAGE
+    target.write_text(reference_page(), encoding="utf-8")
+    return target
 
 
 _DEFAULTS = {f.name: f.default for f in fields(Settings)}

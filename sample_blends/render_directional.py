@@ -1,4 +1,4 @@
-"""Render ``directional_wall.png``: a normal-mapped wall lit through the plain lightmap (left) and
+"""Render ``docs/img/directional_wall.png``: a normal-mapped wall lit through the plain lightmap (left) and
 through the directional one (right), side by side.
 
 A 2 m wall (bumped by a noise height field through a Bump node) between a warm lamp grazing
@@ -138,7 +138,7 @@ def main() -> None:
     scene.render.resolution_x, scene.render.resolution_y = 640, 310
     scene.render.resolution_percentage = 100
     scene.render.image_settings.file_format = "PNG"
-    scene.render.filepath = str(HERE / "directional_wall.png")
+    scene.render.filepath = str(HERE.parent / "docs" / "img" / "directional_wall.png")
     bpy.ops.render.render(write_still=True)
     print("written", scene.render.filepath)
 

@@ -1,4 +1,4 @@
-"""Render ``cornell_lightmap.png``: the Cornell box shown through its baked lightmap alone.
+"""Render ``docs/img/cornell_lightmap.png``: the Cornell box shown through its baked lightmap alone.
 
 Bakes the ``combined`` content (emission + albedo × lighting) of every mesh into one atlas with the
 default method (hierarchical radiosity) and hooks it up (``--hookup``); then, for the picture only, each material shows
@@ -47,7 +47,7 @@ def main() -> None:
     scene.render.resolution_x = scene.render.resolution_y = 512
     scene.render.resolution_percentage = 100
     scene.render.image_settings.file_format = "PNG"
-    scene.render.filepath = str(HERE / "cornell_lightmap.png")
+    scene.render.filepath = str(HERE.parent / "docs" / "img" / "cornell_lightmap.png")
     bpy.ops.render.render(write_still=True)
     print("written", scene.render.filepath)
 

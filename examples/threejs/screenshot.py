@@ -1,4 +1,4 @@
-"""Write ``screenshot.png`` (manual, docs/engines.md): the sample Cornell box baked
+"""Write ``docs/img/threejs_screenshot.png`` (manual, docs/engines.md): the sample Cornell box baked
 at the defaults (hierarchical radiosity) into an RGBM lightmap, exported as a GLB and shown by this folder's three.js page in headless
 Chromium (``headless``). Run by hand; needs what the browser test needs (``npm ci`` here, Debian's
 chromium):
@@ -20,7 +20,7 @@ from radiosity_baker.addon import cli  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 CORNELL = HERE.parents[1] / "sample_blends" / "cornell_box.blend"
-OUT = HERE / "screenshot.png"
+OUT = HERE.parents[1] / "docs" / "img" / "threejs_screenshot.png"
 
 
 def main() -> int:

@@ -1,4 +1,4 @@
-"""Settings: one source of truth for range, default and help; README's table follows from it;
+"""Settings: one source of truth for range, default and help; the manual's reference follows from it;
 the traps of a bad combination are errors or warnings, not black bakes."""
 from dataclasses import fields
 from pathlib import Path
@@ -10,15 +10,15 @@ import shapes
 from radiosity_baker.core import Settings, bake
 from radiosity_baker.core.errors import BakeError, SettingsError
 from radiosity_baker.core.scene import LAMP_POINT
-from radiosity_baker.core.settings import option, options_markdown, reads
+from radiosity_baker.core.settings import REFERENCE_PAGE, option, reads, reference_page
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+PAGE = Path(__file__).resolve().parents[2] / REFERENCE_PAGE
 
 
-def test_readme_options_table_is_the_one_the_settings_make():
-    expected = options_markdown()
-    assert expected in README.read_text(), (
-        "README's options table is out of date; replace it with:\n" + expected)
+def test_the_manuals_settings_reference_is_the_one_the_settings_make():
+    assert PAGE.read_text(encoding="utf-8") == reference_page(), (
+        f"{REFERENCE_PAGE} is out of date: run .venv/bin/python -c "
+        "'from radiosity_baker.core import settings; settings.write_reference_page()'")
 
 
 @pytest.mark.parametrize("f", fields(Settings), ids=lambda f: f.name)
