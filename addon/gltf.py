@@ -229,7 +229,7 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
             if eight_bit == self.encoding:
                 clipped = encodings.clip_warning(rgb, extras["range"], f"lightmap {image.name}")
                 if clipped:
-                    log.warning(clipped)
+                    log.warning(clipped, popup=True)  # File › Export shows it too
             else:  # the stand-in may clip a hot spot: the float page keeps it
                 exact, _ = encode(rgb, self.encoding)
                 extras["float_image"] = {"encoding": self.encoding,
@@ -362,7 +362,8 @@ class glTF2ImportUserExtension:  # noqa: N801 - the name Blender's glTF importer
             from io_scene_gltf2.io.imp.gltf2_io_binary import BinaryData
 
             data = bytes(BinaryData.get_buffer_view(gltf, buffer_view))
-            image = bpy.data.images.new(name or "Lightmap", 8, 8, float_buffer=True)  # sized by the file
+            # the size is a stand-in: the packed file sets it
+            image = bpy.data.images.new(name or "Lightmap", 8, 8, float_buffer=True)
             image.pack(data=data, data_len=len(data))
             image.source = "FILE"
             self._float_pages[buffer_view] = image
@@ -410,7 +411,7 @@ def _pixels(image) -> np.ndarray:
     if image.source == "SEQUENCE":
         raise LightmapExportError(
             f"lightmap {image.name} is an image sequence (a bake with --frames), and glTF holds "
-            f"one image per lightmap: bake the frame to export without --frames")
+            f"one image per lightmap: bake a single frame (without --frames) to export it")
     w, h = image.size
     if not w or not h:
         raise LightmapExportError(f"lightmap {image.name} has no pixels: its file "

@@ -39,7 +39,8 @@ META_ENCODING, META_RANGE = "radiosity_baker:encoding", "radiosity_baker:range"
 _SMALLEST = 1e-6  # the range of a black page (any positive number decodes it to 0)
 # The range: at most HEADROOM × the BULK percentile of the lit texels' brightness. 16 keeps the
 # samples' bright spots whole (the Cornell box's light: ~12.5 × the 99th percentile) while the
-# smallest step, range/255², stays 1/4000 of the 99th percentile (RGBM: 1.2 % of a texel 100 × darker).
+# smallest step, range/255², stays 1/4000 of the 99th percentile (RGBM: a half step is 1.2 % of a
+# texel 100 × darker than it).
 BULK, HEADROOM = 99.0, 16.0
 
 
