@@ -176,6 +176,10 @@ def _bake(args) -> int:
     outputs = {name: path.resolve() for name, path in given.items()}
     if "gltf" in outputs:
         _check_glb(outputs["gltf"])
+        if settings.frame_list() is not None and "lightmap" in settings.targets:
+            raise UsageError(f"--gltf with --frames and --target {settings.target}: an "
+                             f"animation's lightmaps are image sequences and glTF holds one image "
+                             f"per lightmap; bake one frame (--frames left out) for the GLB")
     for path in outputs.values():
         check_file(path)
     # --device cuda without a GPU: a bad argument, said now; else the one line naming the device
@@ -304,8 +308,9 @@ def _write_gltf(staging: Staging, target: Path, encoding: str, color_attribute,
         try:
             bpy.ops.export_scene.gltf(filepath=str(temp), export_format="GLB",
                                       export_texcoords=True, export_cameras=True, **colors)
-        except RuntimeError as exc:
-            raise OutputError(f"cannot write {target}: {_first_line(exc)}") from None
+        except RuntimeError as exc:  # the operator's error report (our hooks' failures too)
+            reason = _first_line(exc).removeprefix("Error: ")
+            raise OutputError(f"cannot write {target}: {reason}") from None
 
 
 # A whole .blend file ends with an ENDB block (its code, then a header of zeros: 16 bytes or more)

@@ -2,11 +2,21 @@
 
 This user extension adds to each material of a lightmapped object ``extensions.MOZ_lightmap =
 {index, texCoord: 1, intensity, extras}``: ``index`` a texture holding the object's lightmap page
-encoded as ``encoding`` says (rgbm/rgbd: 8-bit PNG; hdr: Radiance RGBE, ``image/vnd.radiance``;
-half/float: OpenEXR, ``image/x-exr``), ``intensity`` 1 (the texels hold lighting = irradiance/π,
-as Hubs' MOZ_lightmap loader reads them), ``extras`` {"encoding", "range"} (range: the largest
-value an 8-bit page holds, also in the PNG's metadata). A lightmapped object without a material
-gets, in the file only, a grey 0.8 diffuse one (what the bake took it for) carrying its lightmap.
+as an 8-bit PNG, ``intensity`` 1 (the texels hold lighting = irradiance/π, as Hubs' MOZ_lightmap
+loader reads them), ``extras`` {"encoding", "range"} of that PNG (rgbm or rgbd; range: the largest
+value it holds, also in the PNG's metadata). glTF's core allows only PNG and JPEG as a texture's
+image (the Khronos validator's TEXTURE_INVALID_IMAGE_MIME_TYPE), so a float encoding (hdr:
+Radiance RGBE, ``image/vnd.radiance``; half/float: OpenEXR, ``image/x-exr``) is no texture: its
+file lies in a buffer view of the binary chunk named by ``extras.float_image`` = {"encoding",
+"bufferView", "mimeType"}, and the texture holds the page in rgbm, what a loader reading only
+``index`` finds. A directional bake's file is named by ``extras.directional`` the same way (a PNG
+as a texture: {"layout", "texture"}; an EXR as {"layout", "bufferView", "mimeType"}). A
+lightmapped object without a material gets, in the file only, a grey 0.8 diffuse one (what the
+bake took it for) carrying its lightmap.
+
+The exporter catches what a hook raises and only logs it, then writes the file without that
+lightmap; so each hook here (:func:`_failing_the_export`) logs its failure as an error the
+operator reports: File › Export shows it, and ``bpy.ops`` raises it (the command line's error).
 
 Blender's exporter numbers UV maps in their order; engines (Unity, Godot, three.js) take the
 second set as the lightmap's. So the export renumbers each mesh's sets: ``TEXCOORD_0`` the first
@@ -23,8 +33,10 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import functools
 import sys
 import tempfile
+import traceback
 from pathlib import Path
 
 import bpy
@@ -37,7 +49,29 @@ from .tags import DIRECTIONAL_TAG, IMAGE_TAG, NODE_IMAGE, NODE_UV, OBJECT_TAG
 
 EXTENSION = "MOZ_lightmap"
 ENCODINGS = ("rgbm", "rgbd", "hdr", "half", "float")
+FALLBACK = "rgbm"  # the texture of a float encoding's lightmap, for loaders that read only index
 MIME = {".png": "image/png", ".hdr": "image/vnd.radiance", ".exr": "image/x-exr"}
+
+
+class LightmapExportError(ValueError):
+    """A lightmap the export cannot carry; the message names it and says what to do."""
+
+
+def _failing_the_export(hook):
+    """Blender exporter hook ``hook`` (a method whose last argument is export_settings) whose
+    failure fails the export: logged as an error for the operator to report, with the traceback
+    on the console for anything but a LightmapExportError (a bug)."""
+    @functools.wraps(hook)
+    def run(self, *args):
+        try:
+            hook(self, *args)
+        except Exception as exc:  # noqa: BLE001 - the exporter would swallow it
+            log = args[-1]["log"]
+            if not isinstance(exc, LightmapExportError):
+                log.error(traceback.format_exc())
+                exc = f"{type(exc).__name__}: {exc}"
+            log.error(f"Radiosity Baker lightmaps: {exc}", popup=True)
+    return run
 
 
 class RadiosityBakerGltfSettings(bpy.types.PropertyGroup):
@@ -84,6 +118,7 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
         self._renumbered: dict = {}  # (id(glTF material), renumbering) -> (material, its copy)
         self._defaults: dict = {}  # image name -> default glTF material carrying that lightmap
 
+    @_failing_the_export
     def gather_material_hook(self, gltf2_material, blender_material, export_settings):
         if not self.enabled or gltf2_material is None:
             return
@@ -97,6 +132,7 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
                 f"carries {image.name}; give the objects their own materials")
         self._add_lightmap(gltf2_material, image, export_settings)
 
+    @_failing_the_export
     def gather_mesh_hook(self, gltf2_mesh, blender_mesh, blender_object, vertex_groups, modifiers,
                          materials, export_settings):
         """Renumber the TEXCOORD sets of a mesh with a ``Lightmap`` UV map (:func:`texcoord_order`)
@@ -119,6 +155,7 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
             if prim.material is not None:
                 prim.material = self._renumbered_material(prim.material, renumber)
 
+    @_failing_the_export
     def gather_node_hook(self, gltf2_node, blender_object, export_settings):
         """Give the material-less primitives of a lightmapped object a default material with its
         lightmap."""
@@ -149,7 +186,7 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
             log.warning(f"lightmap {image.name} is a UDIM tile set, which glTF cannot hold: "
                         f"bake with --atlas-pages one or --layout per_object to export it")
             return
-        texture, extras = self._texture(image)
+        texture, extras = self._texture(image, log)
         extensions = gltf2_material.extensions or {}
         extensions[EXTENSION] = self._extension(
             EXTENSION, {"index": texture, "texCoord": 1, "intensity": 1.0, "extras": extras},
@@ -181,24 +218,42 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
             self._renumbered[key] = (material, _renumbered(material, renumber))
         return self._renumbered[key][1]
 
-    def _texture(self, image):
-        """(glTF texture, extras) of Blender ``image``, encoded once per export."""
+    def _texture(self, image, log):
+        """(glTF texture, extras) of Blender ``image``, encoded once per export: the texture holds
+        the page in the 8-bit encoding asked for, or in ``FALLBACK`` beside a float one (in
+        ``extras.float_image``, see the module's docstring)."""
         if image.name not in self._textures:
-            data, suffix, extras = encode_image(image, self.encoding)
-            texture = self._embedded(data, suffix, image.name)
+            rgb = _pixels(image)
+            eight_bit = self.encoding if self.encoding in encodings.EIGHT_BIT else FALLBACK
+            data, extras = encode(rgb, eight_bit)
+            if eight_bit == self.encoding:
+                clipped = encodings.clip_warning(rgb, extras["range"], f"lightmap {image.name}")
+                if clipped:
+                    log.warning(clipped, popup=True)  # File › Export shows it too
+            else:  # the stand-in may clip a hot spot: the float page keeps it
+                exact, _ = encode(rgb, self.encoding)
+                extras["float_image"] = {"encoding": self.encoding,
+                                         **self._stored(exact, encodings.SUFFIX[self.encoding])}
+            texture = self._embedded(data, image.name)
             self._textures[image.name] = (texture, {**extras, **self._directional(image)})
         return self._textures[image.name]
 
-    def _embedded(self, data: bytes, suffix: str, name: str):
-        """A glTF texture holding the image file ``data`` (of type ``suffix``) in the binary."""
-        source = self._io.Image(buffer_view=self._binary(data=data), extensions=None, extras=None,
-                                mime_type=MIME[suffix], name=name, uri=None)
+    def _embedded(self, png: bytes, name: str):
+        """A glTF texture holding the PNG file ``png`` in the binary."""
+        source = self._io.Image(buffer_view=self._binary(data=png), extensions=None, extras=None,
+                                mime_type=MIME[".png"], name=name, uri=None)
         return self._io.Texture(extensions=None, extras=None, name=name, sampler=None, source=source)
 
+    def _stored(self, data: bytes, suffix: str) -> dict:
+        """{"bufferView", "mimeType"} of image file ``data`` (of type ``suffix``, one glTF's core
+        does not allow: EXR, HDR) put in the binary as a buffer view of its own."""
+        return {"bufferView": self._binary(data=data), "mimeType": MIME[suffix]}
+
     def _directional(self, image) -> dict:
-        """{"directional": {"layout", "texture"}} for a page baked with ``--directional``: the file
-        beside it (``<page>.sh.exr``, ``.godot.exr`` or ``.dir.png``, README "Directional
-        lightmaps") as one more texture, whose index the export writes there; else {}."""
+        """{"directional": {"layout", "texture"}} (a PNG) or {"directional": {"layout",
+        "bufferView", "mimeType"}} (an EXR) for a page baked with ``--directional``: the file beside
+        it (``<page>.sh.exr``, ``.godot.exr`` or ``.dir.png``, README "Directional lightmaps");
+        else {}."""
         layout = image.get(DIRECTIONAL_TAG, "none")
         if layout not in DIRECTIONAL_SUFFIX:
             return {}
@@ -206,8 +261,10 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
         path = page.with_name(page.name.rsplit(".", 1)[0] + DIRECTIONAL_SUFFIX[layout])
         if not path.is_file():
             return {}
-        texture = self._embedded(path.read_bytes(), path.suffix, path.name)
-        return {"directional": {"layout": layout, "texture": texture}}
+        if path.suffix == ".png":
+            return {"directional": {"layout": layout,
+                                    "texture": self._embedded(path.read_bytes(), path.name)}}
+        return {"directional": {"layout": layout, **self._stored(path.read_bytes(), path.suffix)}}
 
 
 def texcoord_order(uv_names: list[str]) -> list[int] | None:
@@ -262,10 +319,14 @@ def _renumbered(node, renumber: dict):
 
 
 class glTF2ImportUserExtension:  # noqa: N801 - the name Blender's glTF importer looks for
-    """One import: a material's ``MOZ_lightmap`` texture becomes a Blender image (tagged as ours,
-    with the extension's extras as custom properties, colour space Non-Color for an 8-bit
+    """One import: a material's ``MOZ_lightmap`` lightmap (the float page of
+    ``extras.float_image`` where there is one, else the texture) becomes a Blender image (tagged as
+    ours, with the extension's extras as custom properties, colour space Non-Color for an 8-bit
     encoding), shown by an unconnected ``RB Lightmap`` Image Texture node on the ``Lightmap`` UV
     map; the UV map at ``texCoord`` of each mesh using such a material is named ``Lightmap``."""
+
+    def __init__(self):
+        self._float_pages: dict = {}  # buffer view -> the Blender image made of it
 
     def gather_import_material_after_hook(self, pymaterial, vertex_color, blender_mat, gltf):
         ext = (pymaterial.extensions or {}).get(EXTENSION)
@@ -274,9 +335,15 @@ class glTF2ImportUserExtension:  # noqa: N801 - the name Blender's glTF importer
         from io_scene_gltf2.blender.imp.image import BlenderImage
 
         source = gltf.data.textures[ext["index"]].source
-        BlenderImage.create(gltf, source)
-        image = bpy.data.images[gltf.data.images[source].blender_image_name]
         extras = ext.get("extras") or {}
+        page = extras.get("float_image")
+        if page is not None:  # the float page rather than its 8-bit stand-in
+            image = self._float_page(gltf, page["bufferView"], gltf.data.images[source].name)
+            extras = {**{k: v for k, v in extras.items() if k not in ("range", "float_image")},
+                      "encoding": page["encoding"]}
+        else:
+            BlenderImage.create(gltf, source)
+            image = bpy.data.images[gltf.data.images[source].blender_image_name]
         image[IMAGE_TAG] = image.name
         for key, value in extras.items():
             image[f"radiosity_baker_{key}"] = value
@@ -288,6 +355,19 @@ class glTF2ImportUserExtension:  # noqa: N801 - the name Blender's glTF importer
         tex = nodes.get(NODE_IMAGE) or nodes.new("ShaderNodeTexImage")
         tex.name, tex.label, tex.image = NODE_IMAGE, "Lightmap", image
         blender_mat.node_tree.links.new(uv_node.outputs["UV"], tex.inputs["Vector"])
+
+    def _float_page(self, gltf, buffer_view: int, name: str | None):
+        """The Blender image ``name`` (packed) of the image file in ``buffer_view``, made once."""
+        if buffer_view not in self._float_pages:
+            from io_scene_gltf2.io.imp.gltf2_io_binary import BinaryData
+
+            data = bytes(BinaryData.get_buffer_view(gltf, buffer_view))
+            # the size is a stand-in: the packed file sets it
+            image = bpy.data.images.new(name or "Lightmap", 8, 8, float_buffer=True)
+            image.pack(data=data, data_len=len(data))
+            image.source = "FILE"
+            self._float_pages[buffer_view] = image
+        return self._float_pages[buffer_view]
 
     def gather_import_mesh_after_hook(self, pymesh, mesh, gltf):
         for prim in pymesh.primitives:
@@ -324,18 +404,31 @@ def _page_image(ob):
     return next((im for im in bpy.data.images if im.get(IMAGE_TAG) == page), None)
 
 
-def encode_image(image, encoding: str) -> tuple[bytes, str, dict]:
-    """(file bytes, suffix, extras) of Blender float ``image`` in ``encoding`` (see
-    ``core.lightmap.encodings``); extras: {"encoding"[, "range"]}."""
+def _pixels(image) -> np.ndarray:
+    """float32[H,W,3] linear RGB of Blender float ``image``, row 0 at the bottom (as pages are).
+    LightmapExportError for an image that holds no one page: an image sequence (an animation's
+    lightmaps) or an image whose file cannot be read."""
+    if image.source == "SEQUENCE":
+        raise LightmapExportError(
+            f"lightmap {image.name} is an image sequence (a bake with --frames), and glTF holds "
+            f"one image per lightmap: bake a single frame (without --frames) to export it")
     w, h = image.size
+    if not w or not h:
+        raise LightmapExportError(f"lightmap {image.name} has no pixels: its file "
+                                  f"{bpy.path.abspath(image.filepath)} cannot be read")
     px = np.empty(w * h * 4, np.float32)
-    image.pixels.foreach_get(px)  # linear float, row 0 at the bottom (as pages are)
-    rgb = px.reshape(h, w, 4)[..., :3]
-    suffix = encodings.SUFFIX[encoding]
+    image.pixels.foreach_get(px)
+    return px.reshape(h, w, 4)[..., :3]
+
+
+def encode(rgb: np.ndarray, encoding: str) -> tuple[bytes, dict]:
+    """(file bytes, extras) of float32[H,W,3] ``rgb`` (row 0 at the bottom) in ``encoding``, a
+    file of suffix ``encodings.SUFFIX[encoding]`` (see ``core.lightmap.encodings``); extras:
+    {"encoding"[, "range"]}."""
     with tempfile.TemporaryDirectory(prefix="rb-gltf-") as folder:
-        path = Path(folder) / f"page{suffix}"
+        path = Path(folder) / f"page{encodings.SUFFIX[encoding]}"
         extras = encodings.write(path, rgb, encoding)
-        return path.read_bytes(), suffix, extras
+        return path.read_bytes(), extras
 
 
 def _draw(context, layout) -> None:

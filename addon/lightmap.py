@@ -139,11 +139,13 @@ def request(extraction, settings) -> tuple[LightmapRequest, list[str]]:
     return LightmapRequest(targets, python=python_executable(), cache_dir=_cache_dir()), warnings
 
 
-def write_files(result, settings, staging=None, frame=None, folder=None) -> dict[str, Path]:
+def write_files(result, settings, staging=None, frame=None, folder=None) -> tuple[dict, list]:
     """Write each page as ``<folder>/<page>.exr`` (a tile of a UDIM set as ``<image>.<tile>.exr``;
     ``<page>.<frame>.exr`` for a frame of an animation, four digits: a Blender image sequence)
-    plus a ``.png`` preview; {page stem: path of the file Blender loads}. ``.hdr`` instead of
-    ``.exr`` for the ``hdr`` format; an 8-bit format (rgbm, rgbd) adds ``<page>.<format>.png``.
+    plus a ``.png`` preview; returns ({page stem: path of the file Blender loads}, warnings).
+    ``.hdr`` instead of ``.exr`` for the ``hdr`` format; an 8-bit format (rgbm, rgbd) adds
+    ``<page>.<format>.png``, with a warning where a hot spot's texels are clipped to its range
+    (``encodings.page_range``).
 
     All files are written under temporary names, read back, then moved into place together: on
     any failure (OutputError) the folder is as it was. ``staging``: an ``outputs.Staging`` the
@@ -153,7 +155,7 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
     folder = folder if folder is not None else output_folder(settings)
     suffix = "" if frame is None else f".{frame:04d}"
     names, _ = _file_names(result.pages)  # prepare() warned of the names it changed
-    paths = {}
+    paths, warnings = {}, []
     with contextlib.ExitStack() as stack:
         own = staging is None
         if own:
@@ -170,8 +172,11 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
             if fmt in encodings.EIGHT_BIT:  # Blender shows the float page: a half EXR beside
                 paths[page.stem] = folder / f"{stem}.exr"
                 with staging.writing(folder / f"{stem}.{fmt}.png") as temp:
-                    encodings.write(temp, page.rgb, fmt)
+                    extras = encodings.write(temp, page.rgb, fmt)
                     files.verify(temp, page.size)
+                clipped = encodings.clip_warning(page.rgb, extras["range"],
+                                                 f"lightmap {stem}.{fmt}.png")
+                warnings += [clipped] if clipped else []
             with staging.writing(paths[page.stem]) as temp:
                 encodings.write(temp, page.rgb, "half" if fmt in encodings.EIGHT_BIT else fmt)
                 files.verify(temp, page.size)
@@ -185,7 +190,7 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> dict
                 files.verify(temp, page.size)
         if own:
             staging.commit()
-    return paths
+    return paths, warnings
 
 
 # The file beside a page that holds its directional layout (``--directional``; README,

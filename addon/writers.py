@@ -117,9 +117,12 @@ class LightmapWriter:
         upto = job.frames_left[0] if job.frames_left else job.frame + 1
         paths = None
         for frame in range(job.frame, upto):
-            written = lightmap.write_files(result["lightmap"], job.settings, self._staging, frame,
-                                           self._folder)
-            paths = paths or written
+            written, warnings = lightmap.write_files(result["lightmap"], job.settings,
+                                                     self._staging, frame, self._folder)
+            if paths is None:  # the frames it stands in for repeat its pages and warnings
+                paths = written
+                for message in warnings:
+                    job.warn(message)
         if self._first is None:
             self._first = (self._request, result["lightmap"], paths)
 
@@ -136,7 +139,8 @@ class LightmapWriter:
             result = self.job.result["lightmap"]
             maps = lightmap.prepare(result, self._request, settings)
             # files next, all or none: a disk error leaves Blender untouched
-            self.files = lightmap.write_files(result, settings)
+            self.files, warnings = lightmap.write_files(result, settings)
+            maps.warnings += warnings
         return lambda: maps.apply(result, self.files, settings, sequence)
 
     def discard(self) -> None:

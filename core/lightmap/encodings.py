@@ -10,6 +10,13 @@ page's ``range`` (the largest value it can hold) in the file's metadata:
   value up to range/255 is stored with a = 1, i.e. uniform steps of range/255², brighter values
   with ever coarser steps up to range).
 
+The range is the page's brightest texel, unless that is more than ``HEADROOM`` (16) times the
+brightness (largest channel) that 99 % of its lit texels stay under (``BULK``): then it is 16 times
+that, and the brighter texels — at most 1 % of them, a hot spot — are clipped to it, with a
+warning giving their share (:func:`page_range`, :func:`clip_warning`). The smallest step being
+range/255², a range set by one hot spot (a lamp 5 mm above a floor: 1e6 where most of the floor
+holds ~0.03) would decode almost every texel to 0. ``hdr`` and the EXR formats keep every value.
+
 RGB and A are stored as raw bytes (no sRGB curve: the texture must be sampled as linear / non-colour
 data). The error of each decoded channel is at most half a step of its texel (:func:`step`):
 RGBM ≤ (0.5/255)·(m + range/255), RGBD ≤ (0.5/255)·max(range/255, 2m), where m is the texel's
@@ -30,13 +37,43 @@ EIGHT_BIT = ("rgbm", "rgbd")
 # Image metadata keys written with an 8-bit encoding (PNG text chunks).
 META_ENCODING, META_RANGE = "radiosity_baker:encoding", "radiosity_baker:range"
 _SMALLEST = 1e-6  # the range of a black page (any positive number decodes it to 0)
+# The range: at most HEADROOM × the BULK percentile of the lit texels' brightness. 16 keeps the
+# samples' bright spots whole (the Cornell box's light: ~12.5 × the 99th percentile) while the
+# smallest step, range/255², stays 1/4000 of the 99th percentile (RGBM: a half step is 1.2 % of a
+# texel 100 × darker than it).
+BULK, HEADROOM = 99.0, 16.0
+
+
+def brightness(rgb: np.ndarray) -> np.ndarray:
+    """float32[H,W]: the largest channel of each texel of float32[H,W,3] ``rgb``, what the 8-bit
+    encodings scale by (not finite and negative values count as 0)."""
+    return np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0).max(axis=2, initial=0.0)
 
 
 def page_range(rgb: np.ndarray) -> float:
-    """The range an 8-bit encoding of float32[H,W,3] ``rgb`` needs: its largest finite value
-    (negative values are clamped to 0 by the encoders), at least 1e-6."""
-    finite = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
-    return float(max(finite.max(initial=0.0), _SMALLEST))
+    """The range of an 8-bit encoding of float32[H,W,3] ``rgb``: its brightest finite texel, at
+    most ``HEADROOM`` × the ``BULK`` percentile of its lit (> 0) texels' brightness, at least 1e-6.
+    Texels above it are clipped (:func:`clip_warning` says how many)."""
+    m = brightness(rgb)
+    lit = m[m > 0]
+    if not lit.size:
+        return _SMALLEST
+    return float(max(min(lit.max(), HEADROOM * np.percentile(lit, BULK)), _SMALLEST))
+
+
+def clip_warning(rgb: np.ndarray, value_range: float, what: str) -> str | None:
+    """The warning for ``what`` (e.g. "lightmap Lightmap") when texels of float32[H,W,3] ``rgb``
+    are brighter than the 8-bit ``value_range`` it is encoded with (they are clipped to it);
+    None when none is."""
+    m = brightness(rgb)
+    clipped = int(np.count_nonzero(m > value_range))
+    if not clipped:
+        return None
+    share = 100.0 * clipped / max(int(np.count_nonzero(m > 0)), 1)
+    return (f"{what}: {share:.2g} % of its lit texels ({clipped}) are brighter than the 8-bit "
+            f"range {value_range:.4g} and are clipped to it (the brightest: {m.max():.4g}), so "
+            f"that the others keep their precision; --lightmap-format hdr (or half, float) keeps "
+            f"every value")
 
 
 def encode(rgb: np.ndarray, encoding: str, value_range: float) -> np.ndarray:

@@ -1,8 +1,10 @@
 // A GLTFLoader plugin for MOZ_lightmap ({index, texCoord, intensity}) as Radiosity Baker writes it:
-// the texture is an 8-bit PNG in RGBM or RGBD (extras.encoding, extras.range), Radiance HDR
-// (image/vnd.radiance) or OpenEXR (image/x-exr). Texels hold lighting = irradiance/π (Hubs'
-// convention); three.js adds lightMap × lightMapIntensity to the irradiance and multiplies by
-// albedo/π, so lightMapIntensity = π × intensity.
+// the texture is an 8-bit PNG in RGBM or RGBD (extras.encoding, extras.range); a float lightmap
+// (glTF's core allows no float texture) is an image file in a buffer view named by
+// extras.float_image = {encoding, bufferView, mimeType}: Radiance HDR (image/vnd.radiance) or
+// OpenEXR (image/x-exr), loaded here in place of the texture, its RGBM stand-in. Texels hold
+// lighting = irradiance/π (Hubs' convention); three.js adds lightMap × lightMapIntensity to the
+// irradiance and multiplies by albedo/π, so lightMapIntensity = π × intensity.
 import { DataTexture, LinearFilter, NoColorSpace, ShaderChunk } from 'three';
 import { HDRLoader } from 'three/addons/loaders/HDRLoader.js';
 import { EXRLoader } from 'three/addons/loaders/EXRLoader.js';
@@ -21,12 +23,14 @@ export class MozLightmapPlugin {
     this.name = NAME;
   }
 
-  async floatTexture(source, Loader) {
-    const json = this.parser.json;
-    const buffer = await this.parser.getDependency('bufferView', json.images[source].bufferView);
+  async floatTexture(page) {
+    const Loader = page.mimeType === 'image/vnd.radiance' ? HDRLoader : EXRLoader;
+    const buffer = await this.parser.getDependency('bufferView', page.bufferView);
     const data = new Loader().parse(buffer);
     const texture = new DataTexture(data.data, data.width, data.height, data.format, data.type);
-    texture.flipY = false;  // glTF: the first row of the image is v = 0
+    // glTF: the first row of the image file is v = 0, the opposite of what the loader's own
+    // flipY is for (HDRLoader keeps the file's rows, flipY true; EXRLoader reverses them, false)
+    texture.flipY = !data.flipY;
     texture.minFilter = texture.magFilter = LinearFilter;
     texture.generateMipmaps = false;
     texture.needsUpdate = true;
@@ -36,13 +40,12 @@ export class MozLightmapPlugin {
   async extendMaterialParams(materialIndex, params) {
     const ext = (this.parser.json.materials[materialIndex].extensions || {})[NAME];
     if (!ext) return;
-    const extras = ext.extras || {};
-    const source = this.parser.json.textures[ext.index].source;
-    const mime = this.parser.json.images[source].mimeType;
+    let extras = ext.extras || {};
     let texture;
-    if (mime === 'image/vnd.radiance') texture = await this.floatTexture(source, HDRLoader);
-    else if (mime === 'image/x-exr') texture = await this.floatTexture(source, EXRLoader);
-    else {
+    if (extras.float_image) {
+      texture = await this.floatTexture(extras.float_image);
+      extras = { encoding: extras.float_image.encoding };  // nothing to decode in the shader
+    } else {
       texture = await this.parser.loadTexture(ext.index);
       texture.colorSpace = NoColorSpace;  // encoded data, not colour
     }

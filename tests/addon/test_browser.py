@@ -108,13 +108,14 @@ def object_means(rgb: np.ndarray, index: np.ndarray, names: list) -> dict:
     return means
 
 
-def test_threejs_page_shows_the_cornell_lightmap_as_blender_does(empty_scene, tmp_path):
-    _require_browser()
+@pytest.mark.parametrize("encoding", ["rgbm", "hdr", "half"])  # a PNG texture; float pages in
+def test_threejs_page_shows_the_cornell_lightmap_as_blender_does(empty_scene, tmp_path, encoding):
+    _require_browser()  # buffer views (extras.float_image): HDRLoader, EXRLoader
     site = headless.make_site(tmp_path / "site")
     saved, glb = tmp_path / "box.blend", site / "cornell_box.glb"
     assert cli.main(["bake", str(CORNELL), "--method", "bunnell", "--samples", "4", "--target",
                      "lightmap", "--texel-density", "8", "--output", str(tmp_path / "maps"),
-                     "--lightmap-format", "rgbm", "--gltf", str(glb), "--save", str(saved)]) == 0
+                     "--lightmap-format", encoding, "--gltf", str(glb), "--save", str(saved)]) == 0
     page = screenshot(site, tmp_path, "")
     stripped = screenshot(site, tmp_path, "&strip=1")
     reference, index, names = blender_view(saved, tmp_path)

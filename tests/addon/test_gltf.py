@@ -152,8 +152,9 @@ def test_export_command_encodes_as_asked_and_can_leave_lightmaps_out(baked, tmp_
     assert hashlib.sha256(saved.read_bytes()).hexdigest() == before
     doc, _ = read_glb(hdr)
     ext = doc["materials"][0]["extensions"]["MOZ_lightmap"]
-    assert ext["extras"] == {"encoding": "hdr"}
-    assert doc["images"][doc["textures"][ext["index"]]["source"]]["mimeType"] == "image/vnd.radiance"
+    assert ext["extras"]["float_image"]["encoding"] == "hdr"  # beside an RGBM texture
+    assert ext["extras"]["float_image"]["mimeType"] == "image/vnd.radiance"
+    assert doc["images"][doc["textures"][ext["index"]]["source"]]["mimeType"] == "image/png"
     doc, _ = read_glb(bare)
     assert "MOZ_lightmap" not in json.dumps(doc) and "COLOR_0" not in json.dumps(doc)
     assert "TEXCOORD_1" in json.dumps(doc)
@@ -270,9 +271,8 @@ def test_file_export_with_the_addon_enabled_uses_the_panel_settings(samples, add
         for prim in doc["meshes"][nodes[ob_name]["mesh"]]["primitives"]:
             assert "TEXCOORD_1" in prim["attributes"]
             ext = doc["materials"][prim["material"]]["extensions"]["MOZ_lightmap"]
-            assert ext["texCoord"] == 1 and ext["extras"] == {"encoding": "hdr"}
-            image = doc["images"][doc["textures"][ext["index"]]["source"]]
-            assert image["mimeType"] == "image/vnd.radiance"
+            assert ext["texCoord"] == 1 and ext["extras"]["float_image"]["encoding"] == "hdr"
+            assert ext["extras"]["float_image"]["mimeType"] == "image/vnd.radiance"
     doc, _ = read_glb(bare)  # left out: no lightmap, and Blender's own UV numbering
     assert "MOZ_lightmap" not in json.dumps(doc)
     for ob_name, names in uv_maps.items():

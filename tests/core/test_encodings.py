@@ -61,3 +61,37 @@ def test_a_black_page_encodes_and_decodes_to_black():
     r = encodings.page_range(rgb)
     for encoding in encodings.EIGHT_BIT:
         assert not encodings.decode(encodings.encode(rgb, encoding, r), encoding, r).any()
+
+
+def _hot_spot_floor(n: int = 257) -> np.ndarray:
+    """float32[n,n,3]: lighting (irradiance/π) of a 4 m floor under a 1000 W point lamp 5 mm above
+    its centre texel: 1e6 there, ~0.03 over most of the floor (seven decades)."""
+    x = np.linspace(-2.0, 2.0, n)
+    d2 = x[:, None] ** 2 + x[None, :] ** 2 + 0.005 ** 2
+    lighting = 1000.0 / (4 * np.pi ** 2 * d2) * (0.005 / np.sqrt(d2))
+    return np.repeat(lighting[..., None], 3, axis=2).astype(np.float32)
+
+
+@pytest.mark.parametrize("encoding", encodings.EIGHT_BIT)
+def test_a_hot_spot_is_clipped_with_a_warning_so_the_rest_of_the_page_keeps_its_precision(
+        encoding, tmp_path):
+    rgb = _hot_spot_floor()
+    m = rgb.max(axis=2)
+    meta = encodings.write(tmp_path / "page.png", rgb, encoding)
+    decoded, _ = encodings.read(tmp_path / "page.png")
+    r = meta["range"]
+    clipped = m > r
+    assert m.max() > 9e5 and 0 < clipped.mean() <= 0.01  # the hot spot alone
+    assert np.all(decoded[clipped] == pytest.approx(r, rel=0.01))  # clipped to the range
+    kept = decoded.max(axis=2)[~clipped]
+    assert (kept > 0).all()  # the brightest texel's range decoded 98 % of them to 0
+    relative = np.abs(kept - m[~clipped]) / m[~clipped]
+    # seven decades in 8 bits: the bulk, three decades below the range, in steps of a few %
+    assert np.median(relative) < 0.02 and np.percentile(relative, 90) < 0.1
+    print(f"{encoding}: range {r:.4g} (brightest {m.max():.4g}), {100 * clipped.mean():.2f} % "
+          f"clipped, relative error of the others: median {np.median(relative):.4f}, 90th "
+          f"percentile {np.percentile(relative, 90):.4f}")
+    message = encodings.clip_warning(rgb, r, "lightmap Floor")
+    share = f"{100 * clipped.mean():.2g} %"
+    assert message.startswith(f"lightmap Floor: {share} of its lit texels") and "hdr" in message
+    assert encodings.clip_warning(_lightmap(), encodings.page_range(_lightmap()), "x") is None
