@@ -252,7 +252,7 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
     def _directional(self, image) -> dict:
         """{"directional": {"layout", "texture"}} (a PNG) or {"directional": {"layout",
         "bufferView", "mimeType"}} (an EXR) for a page baked with ``--directional``: the file beside
-        it (``<page>.sh.exr``, ``.godot.exr`` or ``.dir.png``, README "Directional lightmaps");
+        it (``<page>.sh.exr``, ``.godot.exr`` or ``.dir.png``, manual: docs/directional-probes.md);
         else {}."""
         layout = image.get(DIRECTIONAL_TAG, "none")
         if layout not in DIRECTIONAL_SUFFIX:

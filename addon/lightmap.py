@@ -193,8 +193,8 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> tupl
     return paths, warnings
 
 
-# The file beside a page that holds its directional layout (``--directional``; README,
-# "Directional lightmaps and light probes").
+# The file beside a page that holds its directional layout (``--directional``; manual,
+# docs/directional-probes.md).
 DIRECTIONAL_SUFFIX = {"sh": ".sh.exr", "godot": ".godot.exr", "unity": ".dir.png"}
 
 

@@ -18,7 +18,7 @@ def _prop(layout, s, name: str) -> None:
 
 def _farm(layout, s) -> None:
     """The Scheduler field (a Dask farm), and how to get ``distributed`` where Blender lacks it
-    (the extension zip does not bundle it: README "Baking on a farm")."""
+    (the extension zip does not bundle it: manual: docs/farm.md)."""
     layout.prop(s, "scheduler")
     if s.scheduler.strip() and importlib.util.find_spec("distributed") is None:
         col = layout.column(align=True)

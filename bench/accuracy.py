@@ -36,7 +36,7 @@ The equal-error speedup is the time Cycles needs to reach our error — interpol
 error / log time curve, or extrapolated along its last segment when our error lies outside the
 measured range (marked) — divided by our time. Writes bench/results/accuracy-<machine>-<date>.json
 (accuracy-direct-… with ``--passes direct``),
-a PNG plot and the markdown tables README quotes (.md) beside it, and prints the tables.
+a PNG plot and the markdown tables the manual quotes (.md) beside it, and prints the tables.
 """
 from __future__ import annotations
 

@@ -169,7 +169,7 @@ def summary(row: dict) -> str:
 
 
 def markdown(report: dict) -> str:
-    """The table README quotes: per scene and version, CPU seconds per category, the bake's wall
+    """The table the manual quotes: per scene and version, CPU seconds per category, the bake's wall
     and CPU seconds, rays per link pair and link creation per CPU second."""
     cats = list(CATEGORIES) + ["other kernels"]
     lines = [f"| scene | version | {' | '.join(cats)} | bake wall (CPU) s | rays/pair | rays/CPU s | create links/CPU s |",

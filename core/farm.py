@@ -54,7 +54,7 @@ def _distributed():
         import distributed
     except ImportError:
         raise BakeError("baking on a farm needs the Python package 'distributed' "
-                        "(pip install distributed, or the set-up command in README)") from None
+                        "(pip install distributed, or the set-up command in README.md)") from None
     return distributed
 
 

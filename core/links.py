@@ -1068,7 +1068,7 @@ def _depth_first(problem, oracle: Oracle, decide: list, qa: wp.array, qb: wp.arr
     to, follow from the queue alone), or None when the links do not fit the budget.
 
     This saves the breadth-first rounds' candidate arrays, scans and scatter, and each round's
-    launches (room20k's build ~15 % faster; README)."""
+    launches (room20k's build ~15 % faster; bench/results/history.md)."""
     tree, dev, stages = problem.tree, problem.device, problem.stages
     d = dev.name
     q = qa.size

@@ -1,6 +1,6 @@
 """Where light comes from: the first moment of arriving light and real spherical harmonics (SH).
 
-Conventions (README, "Directional lightmaps and light probes"):
+Conventions (docs/directional-probes.md):
 
 - **Moment** of the light arriving at a surface point with unit normal n: m = (1/π) ∫ L(ω) ω dω
   over the directions light arrives from (W m⁻² sr⁻¹, per RGB channel; world space; it points

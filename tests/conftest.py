@@ -1,6 +1,6 @@
 """Puts ``bench/`` on the path: the Cycles harness and the error measures (``harness``) live there,
 outside the extension, and tests use them as the benchmarks do; and ``examples/threejs/`` for the
-browser test's ``headless`` (the page in Chromium, shared with the README picture's script)."""
+browser test's ``headless`` (the page in Chromium, shared with the manual picture's script)."""
 import os
 import sys
 

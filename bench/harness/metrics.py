@@ -1,4 +1,4 @@
-"""Error measures between a bake and a reference (per-vertex or per-texel RGB), as README quotes them."""
+"""Error measures between a bake and a reference (per-vertex or per-texel RGB), as the manual quotes them."""
 from __future__ import annotations
 
 import numpy as np

@@ -42,7 +42,7 @@ the largest change of I is below ``tolerance`` × the largest lighting value, at
 (``cache["signed"]``); the solution, which is output, is clamped at 0. The tables take rows ×
 bins × 28 bytes (``table_bytes``, ``counts["table_bytes"]``; a warning before the solve above
 TABLE_WARN), float32: tables rounded to half precision after every pass measured the same errors
-(README), but the incoming table accumulates every link's deposit and would accumulate in half;
+(docs/antiradiance.md), but the incoming table accumulates every link's deposit and would accumulate in half;
 kept float32.
 """
 from __future__ import annotations

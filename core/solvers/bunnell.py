@@ -21,7 +21,7 @@ def solve(problem) -> Solution:
     """One bounce of indirect lighting per element (float32[n,3], irradiance/π) from the
     problem's direct lighting: ``I = G(a ⊙ ρ ⊙ D)``, G the gather, a the senders' local
     accessibility. ``bounces`` is not read: the method is one bounce (more bounces of the same
-    gather compound its error, see README)."""
+    gather compound its error, see docs/ao-bunnell.md)."""
     els = problem.elements
     radiance = gather.sender_radiance(problem, problem.direct)
     light = problem.stages.run("gather", gather.light_at, problem, radiance, els.position, els.normal,

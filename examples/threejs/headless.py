@@ -2,7 +2,7 @@
 holding the page and a GLB, and a screenshot of the page through Chromium's own command line
 (``--screenshot`` after ``--virtual-time-budget``: the page draws once, after the GLB has loaded,
 on a magenta page, so a page that did not finish shows magenta). Used by the browser test
-(tests/addon/test_browser.py) and the README picture (screenshot.py); needs no bpy.
+(tests/addon/test_browser.py) and the manual's picture (screenshot.py); needs no bpy.
 """
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
 """Antiradiance on the sample scenes, through the bpy module, against the reference solver (issue
 #11): lighting at the vertices of the reflecting meshes at 256 directional bins, as
-``bench/antiradiance_bench.py --blends`` measures it for README.
+``bench/antiradiance_bench.py --blends`` measures it for the manual (docs/antiradiance.md).
 
 Target: ≤ 5 % relative RMSE, |bias| ≤ 2 %. Measured 1.6 %, +0.3 % on the lamp scene and 3.6 %,
 +0.4 % on the Cornell box (6.2 %, +1.9 % while the ceiling lit 1 mm above the emitter's back was
-cancelled by antiradiance rather than hidden, see README, "Implicit visibility and antiradiance").
+cancelled by antiradiance rather than hidden, see docs/antiradiance.md).
 """
 from pathlib import Path
 

@@ -1,8 +1,8 @@
-"""The accuracy/speed harness (bench/accuracy.py) runs end to end and writes what README quotes.
+"""The accuracy/speed harness (bench/accuracy.py) runs end to end and writes what the manual quotes.
 
 A small run (one scene, low sample counts) proves the command produces the JSON, the markdown
 tables and the plot, with every method placed on Cycles' error/time curve for lighting and AO.
-The figures of a real run are in bench/results and README; here only their shape and sense count.
+The figures of a real run are in bench/results and docs/benchmarks.md; here only their shape and sense count.
 """
 import json
 

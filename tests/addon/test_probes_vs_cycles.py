@@ -8,7 +8,7 @@ SH (Â_l = π, 2π/3, π/4 for l = 0, 1, 2), so the L0–L2 coefficients of Cycl
 band-limited lighting our probe's L2 SH should reproduce in every direction. The test compares the
 two along ±x, ±y, ±z within 5 %; it also prints (and records) how far our L2 (and L1) lighting is
 from Cycles' full, unlimited values there — a few bands cannot follow a bright, small ceiling
-light's clamped cosine (README, "Light probes"). Figures go to out/test-figures/probes_vs_cycles.json.
+light's clamped cosine (docs/directional-probes.md). Figures go to out/test-figures/probes_vs_cycles.json.
 
 The point lies at least 9 cm from every surface and the sphere's radius is 2 mm: the lighting on a
 sphere's side is that at its surface point, not at its centre, and a 1 cm sphere 1 cm from a wall

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 CYCLES_SAMPLES = 2048
 MAX_RMSE, MAX_BIAS = 0.05, 0.02
 HIERARCHICAL_VS_REFERENCE = 0.03
-# Bunnell's one bounce misses the later ones (README, "Accuracy and speed"): most in the white
+# Bunnell's one bounce misses the later ones (docs/benchmarks.md): most in the white
 # Cornell box (measured 19.8 % RMSE, −16.9 % bias), little in the open lamp scene (7.5 %, −3.2 %).
 # Its bounds say what it is: (largest RMSE, lowest bias, highest bias) per scene.
 BUNNELL = {"cornell_box.blend": (0.25, -0.20, 0.0), "lamp_scene.blend": (0.10, -0.05, 0.02)}

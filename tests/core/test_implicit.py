@@ -88,7 +88,7 @@ def test_a_small_near_element_hides_a_far_panel_by_its_share_of_the_bin():
 
 @pytest.mark.parametrize("scene, rmse", [("cornell_box", 0.11), ("cornell_point_lamp", 0.13)])
 def test_cornell_box_against_the_reference(scene, rmse):
-    """Lighting at the vertices against the reference at 256 bins (README has every bin count).
+    """Lighting at the vertices against the reference at 256 bins (docs/antiradiance.md has every bin count).
     With the sample's light measured 10.4 % relative RMSE, −5.5 % bias (26.3 %, +13.4 % while the
     hot ceiling 1 mm behind the emitter, in the emitter's layer, leaked whole: hidden elements
     now show nothing, ``directions.visible``); with a point lamp in the middle instead 12.3 %,

@@ -28,7 +28,7 @@ def test_the_pipeline_holds_no_branch_per_solver():
 
 @pytest.fixture
 def constant_solver(monkeypatch):
-    """A solver registered the way README's developer section shows: indirect light 0.25
+    """A solver registered the way the manual's Development page shows: indirect light 0.25
     everywhere, evaluated by interpolation."""
     module = types.ModuleType("radiosity_baker.core.solvers.constant")
     module.solve = lambda problem: base.Solution(np.full((problem.elements.count, 3), 0.25, np.float32))

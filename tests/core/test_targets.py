@@ -31,7 +31,7 @@ def test_the_pipeline_holds_no_branch_per_target():
 
 
 class Centroids:
-    """A target as README's developer section shows: the light at each triangle's centroid."""
+    """A target as the manual's Development page shows: the light at each triangle's centroid."""
 
     def receivers(self, problem):
         scene = problem.scene
