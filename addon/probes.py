@@ -10,6 +10,7 @@ import bpy
 import numpy as np
 
 from ..core.sh import sh9_numpy
+from .extract import ExtractionError
 from .tags import PROBES_TAG
 
 NAME = "RB Probes"
@@ -30,10 +31,17 @@ _ICO_FACES = np.array([(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11)
 def volume_box(scene) -> tuple[Optional[tuple], Optional[np.ndarray]]:
     """((lo, hi) float64[3] each, m, world; float64[3] cell sides) of the first Light Probe Volume
     among ``scene``'s objects: the world-space bounds of its box (the unit cube under its matrix)
-    and that box cut into its grid resolution; (None, None) without one."""
+    and that box cut into its grid resolution; (None, None) without one. A volume whose box
+    holds no volume (a scale of 0 along any of its axes, however turned) is refused naming it."""
     for ob in scene.objects:
         if ob.type == 'LIGHT_PROBE' and ob.data.type == 'VOLUME':
             m = np.array(ob.matrix_world, np.float64)
+            axes = np.linalg.norm(m[:3, :3], axis=0)
+            flat = abs(np.linalg.det(m[:3, :3])) <= 1e-12 * max(axes.max(), 1e-300) ** 3
+            if flat or not np.all(np.isfinite(m)):
+                raise ExtractionError(f"Light Probe Volume '{ob.name}' has no volume (its box is flat "
+                                      "or of zero size): scale it along all three axes, or remove it "
+                                      "for a grid over the whole scene")
             cube = np.array([(x, y, z, 1.0) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
             corners = (cube @ m.T)[:, :3]
             lo, hi = corners.min(axis=0), corners.max(axis=0)
