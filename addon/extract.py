@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core.elements import shading_vertices
 from ..core.scene import (LAMP_AREA, LAMP_POINT, LAMP_SPOT, LAMP_SUN, SHAPE_ELLIPSE,
-                          SHAPE_RECTANGLE, Lamps, SceneData)
+                          SHAPE_RECTANGLE, Lamps, SceneData, detail_centre)
 from .tags import NODE_MULTIPLY
 
 # Object types whose evaluated geometry is a surface (others: empties, cameras, hair, volumes…).
@@ -558,10 +558,10 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
         return np.concatenate([p[i] for p in parts])
 
     tri_object = np.concatenate([np.full(p[2].shape[0], p[5], np.int32) for p in parts])
-    # Positions are kept relative to the scene's centre, computed in double precision, so a scene
-    # far from the world origin keeps float32 precision (core.scene.SceneData).
+    # Positions are kept relative to a point amid the scene's detail, computed in double
+    # precision, so a scene far from the world origin keeps float32 precision (core.scene).
     world = cat(0)
-    centre = 0.5 * (world.min(axis=0) + world.max(axis=0))
+    centre = detail_centre(world)
     lamps = _lamps(lamp_items)
     lamps.position = (lamps.position.astype(np.float64) - centre).astype(np.float32)
     scene = SceneData(positions=(world - centre).astype(np.float32), corner_normals=cat(1),

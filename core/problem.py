@@ -19,6 +19,7 @@ import warp as wp
 from . import device as device_mod
 from . import direct as direct_mod
 from . import elements as elements_mod
+from . import rays as rays_mod
 from . import refine as refine_mod
 from . import surfels as surfels_mod
 from .errors import BakeError
@@ -54,6 +55,7 @@ class Problem:
             raise BakeError("nothing to bake: the scene has no triangles")
         st = self.stages
         self.source = source = _reflecting(scene, st).recentred()
+        _warn_imprecise(source, st)
         self.device = st.run("device", device_mod.select, settings.device)
         st.run("kernels", device_mod.load_kernels, self.device,
                lambda: st.report("compiling kernels (first bake only, cached afterwards)", 0.0))
@@ -222,6 +224,35 @@ def _reflecting(scene: SceneData, stages: Stages) -> SceneData:
                     "reflect more light than it receives (Cycles clamps a Principled Base Color "
                     "the same way)")
     return scene
+
+
+# The share of an object's size above which its rays' start (``rays.lift``) counts as losing detail.
+PRECISION = 0.05
+
+
+def _warn_imprecise(scene: SceneData, stages: Stages) -> None:
+    """Warn naming the objects of ``scene`` (recentred) that lie so far from its detail, for their
+    size, that a ray leaving them starts more than PRECISION of their size above them
+    (``rays.lift``: the float32 spacing at that distance): their shadows and contacts smaller
+    than that are lost."""
+    corners = np.asarray(scene.positions, np.float64)[scene.triangles]  # [T,3,3]
+    count = len(scene.object_names)
+    far, lo, hi = np.zeros(count), np.full((count, 3), np.inf), np.full((count, 3), -np.inf)
+    np.maximum.at(far, scene.tri_object, np.abs(corners).max(axis=(1, 2)))
+    np.minimum.at(lo, scene.tri_object, corners.min(axis=1))
+    np.maximum.at(hi, scene.tri_object, corners.max(axis=1))
+    size = np.where(np.isfinite(lo).all(axis=1), np.linalg.norm(hi - lo, axis=1), np.inf)
+    lift = far * rays_mod.OFFSET
+    bad = np.flatnonzero(lift > PRECISION * size)
+    if not len(bad):
+        return
+    bad = bad[np.argsort(size[bad] / lift[bad])]
+    named = ", ".join(f"'{scene.object_names[i]}' ({far[i] / 1e3:,.0f} km away, {size[i]:.3g} m, "
+                      f"detail under {lift[i]:.2g} m lost)" for i in bad[:5])
+    more = f" and {len(bad) - 5} more" if len(bad) > 5 else ""
+    stages.warn(f"{len(bad)} object(s) too far from the rest of the scene for float32 precision: "
+                f"{named}{more}; their shadows and contacts are not kept: bake them apart, or bring "
+                "them closer")
 
 
 def _escaping(scene: SceneData, mesh: wp.Mesh, far: float, device: str, stages: Stages) -> SceneData:

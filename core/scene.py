@@ -1,8 +1,9 @@
 """SceneData: what the bake needs of a Blender scene, as plain numpy arrays (no bpy references).
 
 Units: metres. Colours are linear Rec.709 RGB. Positions are relative to ``origin`` (world =
-origin + position): extraction subtracts a point near the scene in double precision, so a scene
-far from the world origin keeps the float32 precision of one at the origin.
+origin + position): extraction subtracts a point amid the scene's detail (``detail_centre``) in
+double precision, so a scene far from the world origin keeps the float32 precision of one at the
+origin.
 
 Vertices are mesh vertices; each triangle corner carries its own shading normal. Splitting a vertex
 whose corners carry different normals (a hard edge) into shading vertices is core's job
@@ -16,6 +17,14 @@ import numpy as np
 
 LAMP_POINT, LAMP_SPOT, LAMP_SUN, LAMP_AREA = 0, 1, 2, 3
 SHAPE_RECTANGLE, SHAPE_ELLIPSE = 0, 1
+
+
+def detail_centre(positions: np.ndarray) -> np.ndarray:
+    """float64[3]: the point a scene's coordinates are best taken from, the per-axis median of its
+    vertices float[V,3] (m): where most of its detail is. (Not the centre of its bounds: one huge
+    far plane under a small scene would put that centre hundreds of km away and the small scene's
+    float32 coordinates would lose every shadow and contact there.)"""
+    return np.median(np.asarray(positions, np.float64), axis=0)
 
 
 @dataclass
@@ -152,14 +161,15 @@ class SceneData:
         return replace(self, albedo=albedo), names
 
     def recentred(self) -> "SceneData":
-        """This scene with positions relative to the centre of its bounding box (computed and
-        subtracted in double precision; ``origin`` moves to match): kernels then work with the
-        coordinates' full float32 precision wherever the scene lies."""
+        """This scene with positions relative to :func:`detail_centre` (computed and subtracted in
+        double precision; ``origin`` moves to match): kernels then work with the coordinates' full
+        float32 precision where the scene's detail is, wherever the scene lies."""
         p = np.asarray(self.positions, np.float64)
         if not len(p):
             return self
-        centre = 0.5 * (p.min(axis=0) + p.max(axis=0))
+        centre = detail_centre(p)
         lamps = replace(self.lamps, position=(np.asarray(self.lamps.position, np.float64)
                                                - centre).astype(np.float32))
         return replace(self, positions=(p - centre).astype(np.float32), lamps=lamps,
                        origin=np.asarray(self.origin, np.float64) + centre)
+
