@@ -166,6 +166,7 @@ class ProbesWriter:
     def check(self, context) -> None:
         lightmap.output_folder(self.job.settings)  # an unwritable folder fails before baking
         self._volume = probes.volume_box(context.scene)
+        self.target().check(self.job.extraction.scene, self.job.settings)  # too many: stop now
 
     def target(self):
         box, spacing = self._volume

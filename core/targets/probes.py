@@ -29,6 +29,9 @@ import warp as wp
 
 from .. import device as device_mod
 from .. import receivers as receivers_mod
+from ..errors import SettingsError
+from ..lightmap.budget import memory_budget
+from ..settings import flag
 from ..direct import MODE_FULL, Emitters, estimate, leaf_direction, leaf_seen
 from ..directions import cone_sample_of
 from ..sh import lighting_from_sh, sh9, sh9_numpy
@@ -43,6 +46,10 @@ INSIDE = 0.25
 HIT_SAMPLES = 1
 BATCH_RAYS = 1 << 20
 MISS, BACK = -1, -2
+# Memory a probe takes at the peak of a probes bake, measured with 200 k probes: Probes.json's
+# document and its text 3.1 KB, the grid and its gather 0.8 KB (the viewport's spheres, 2.3 KB,
+# are made after the text is freed); the ray batches add a fixed ~300 MB.
+BYTES_PER_PROBE = 4096
 sh9_rgb = wp.types.matrix(shape=(9, 3), dtype=wp.float32)
 
 
@@ -125,7 +132,7 @@ def grid_points(lo: np.ndarray, hi: np.ndarray, spacing) -> tuple:
     or float[3] per axis) wide,
     x fastest; (nx, ny, nz); float32[3] the cells' sizes)."""
     extent = np.maximum(np.asarray(hi, np.float64) - lo, 0.0)
-    counts = np.maximum(np.ceil(extent / spacing - 1e-9), 1).astype(int)
+    counts = grid_counts(lo, hi, spacing)
     cell = extent / counts
     axes = [lo[k] + (np.arange(counts[k]) + 0.5) * cell[k] for k in range(3)]
     z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
@@ -133,14 +140,60 @@ def grid_points(lo: np.ndarray, hi: np.ndarray, spacing) -> tuple:
             tuple(int(c) for c in counts), cell.astype(np.float32))
 
 
+def grid_counts(lo: np.ndarray, hi: np.ndarray, spacing) -> np.ndarray:
+    """int64[3]: the cells along each axis of ``grid_points``' grid over lo…hi (m) at ``spacing``."""
+    extent = np.maximum(np.asarray(hi, np.float64) - lo, 0.0)
+    return np.maximum(np.ceil(extent / spacing - 1e-9), 1).astype(np.int64)
+
+
 class Target:
     """Light probes on a grid over ``box`` ((lo, hi) float[3] each, m, world; None: the scene's
     bounds), cells at most ``spacing`` m (float or float[3] per axis; None:
-    ``settings.probe_spacing``); its result is a ``ProbeGrid``."""
+    ``settings.probe_spacing``); its result is a ``ProbeGrid``. A box and a spacing given
+    together are a Light Probe Volume's (its resolution)."""
 
     def __init__(self, box: Optional[tuple] = None, spacing=None):
         self.box = box
         self.spacing = spacing
+
+    def _grid(self, scene, settings) -> tuple:
+        """((lo, hi) float64[3] each in ``scene``'s frame, spacing: m) of the grid over ``scene``."""
+        if self.box is None:
+            lo, hi = scene.positions.min(axis=0), scene.positions.max(axis=0)
+        else:
+            origin = np.asarray(scene.origin, np.float64)
+            lo, hi = (np.asarray(b, np.float64) - origin for b in self.box)
+        spacing = self.spacing if self.spacing is not None else settings.probe_spacing
+        return (np.asarray(lo, np.float64), np.asarray(hi, np.float64)), spacing
+
+    def check(self, scene, settings) -> int:
+        """The probes the grid over ``scene`` (a SceneData) will hold; raises SettingsError, before
+        anything is allocated, when they would take more than ``memory_budget()`` (BYTES_PER_PROBE
+        each), saying what fits: the ``--probe-spacing``, or a Light Probe Volume's resolution."""
+        (lo, hi), spacing = self._grid(scene, settings)
+        counts = grid_counts(lo, hi, spacing)
+        count, budget = int(np.prod(counts, dtype=np.float64)), memory_budget()
+        most = budget // BYTES_PER_PROBE
+        if count <= most:
+            return count
+        shape = "×".join(str(int(c)) for c in counts)
+        if self.box is not None and self.spacing is not None:
+            fit = np.maximum(np.floor(counts * (most / count) ** (1.0 / 3.0)), 1).astype(np.int64)
+            while np.prod(fit, dtype=np.float64) > most:
+                fit = np.maximum(fit - 1, 1)
+            fits = "a resolution of at most " + "×".join(str(int(c)) for c in fit) + " fits"
+        else:
+            low, high = float(spacing), float(np.max(hi - lo))  # the fitting spacing lies between
+            for _ in range(64):
+                mid = 0.5 * (low + high)
+                low, high = (low, mid) if np.prod(grid_counts(lo, hi, mid), dtype=np.float64) <= most \
+                    else (mid, high)
+            step = 10.0 ** (np.floor(np.log10(high)) - 2)  # three digits, rounded up: it still fits
+            fits = f"a {flag('probe_spacing')} of {np.ceil(high / step) * step:g} m fits"
+        raise SettingsError(
+            f"light probes: a grid of {shape} = {count:,} probes would take about "
+            f"{count * BYTES_PER_PROBE / 2**30:,.1f} GB, more than the {budget / 2**30:,.1f} GB a "
+            f"bake may use (half this machine's memory): {fits}")
 
     def receivers(self, problem) -> receivers_mod.Receivers:
         """The elements: the probes read the solved lighting there."""
@@ -148,16 +201,12 @@ class Target:
 
     def finish(self, problem, at, light: receivers_mod.Light) -> ProbeGrid:
         scene = problem.scene
-        origin = np.asarray(scene.origin, np.float64)
-        if self.box is None:
-            lo, hi = scene.positions.min(axis=0), scene.positions.max(axis=0)
-        else:
-            lo, hi = (np.asarray(b, np.float64) - origin for b in self.box)
-        spacing = self.spacing if self.spacing is not None else problem.settings.probe_spacing
-        points, shape, cell = grid_points(np.asarray(lo, np.float64), np.asarray(hi, np.float64),
-                                          spacing)
+        self.check(scene, problem.settings)
+        (lo, hi), spacing = self._grid(scene, problem.settings)
+        points, shape, cell = grid_points(lo, hi, spacing)
         sh, back = problem.stages.run("probes", self._gather, problem, points, light)
         problem.counts["probes"] = len(points)
+        origin = np.asarray(scene.origin, np.float64)
         return ProbeGrid(points=(points + origin).astype(np.float32), sh=sh, valid=back <= INSIDE,
                          shape=shape, spacing=cell)
 

@@ -2,10 +2,13 @@
 import math
 
 import numpy as np
+import pytest
 
 import shapes
 from radiosity_baker.core import Settings, bake, targets
+from radiosity_baker.core.errors import SettingsError
 from radiosity_baker.core.scene import LAMP_POINT
+from radiosity_baker.core.targets import probes as probes_mod
 from radiosity_baker.core.targets.probes import grid_points
 
 
@@ -31,3 +34,23 @@ def test_a_probe_sees_the_lamp_above_and_inside_a_box_is_invalid():
     up, down = grid.lighting(np.array([[0, 0, 1.0], [0, 0, -1.0]]))[k, :, 0]
     print(f"facing the lamp: {up:.4f} (lamp alone {lamp:.4f}); facing the floor {down:.4f}")
     assert abs(up / lamp - 1) < 0.1 and 0 < down < up
+
+
+def test_a_grid_over_a_2_km_scene_that_would_not_fit_in_memory_is_refused_before_allocating(monkeypatch):
+    """The default 1 m spacing over a 2 km ground holds 4 million probes, 16 GB: refused before the
+    grid is made (before, a MemoryError after the solve), with the spacing that fits."""
+    monkeypatch.setattr(probes_mod, "memory_budget", lambda: 8 << 30)
+    made = []
+    monkeypatch.setattr(probes_mod, "grid_points", lambda *a: made.append(a))
+    p, n, t = shapes.grid(2000.0, 4)
+    box = shapes.box(1.0, 1, centre=(0.0, 0.0, 0.5))
+    sc = shapes.scene([(p, n, t, (0.5,) * 3, (0,) * 3), *[(*f, (0.5,) * 3, (0,) * 3) for f in box]],
+                      shapes.lamp(LAMP_POINT, (0, 0, 3.0), power=(80.0,) * 3))
+    target = targets.make("probes")
+    with pytest.raises(SettingsError, match=r"2000×2000×1 = 4,000,000 probes .* a --probe-spacing "
+                                            r"of 1\.39 m fits"):
+        target.check(sc, Settings())
+    with pytest.raises(SettingsError, match="4,000,000 probes"):
+        bake(sc, Settings(method="direct", device="cpu", light_samples=1), targets=[target])
+    assert not made
+    assert target.check(sc, Settings(probe_spacing=1.39)) * probes_mod.BYTES_PER_PROBE <= 8 << 30
