@@ -198,6 +198,8 @@ class BakeJob:
             w.begin(context)
         if self.settings.scheduler.strip():
             self.farm = farm_mod.Farm(self.settings.scheduler.strip())
+            for message in self.farm.warnings:
+                self.warn(message)
 
     def _extract(self, context) -> None:
         """Extract the next frame (the current one for a still bake), the scene's frame restored."""

@@ -47,6 +47,25 @@ CONNECT_TIMEOUT = 10.0
 WORKER_TIMEOUT = 60.0
 # The resource a task asks for on a CUDA bake (workers started with --resources GPU=1).
 GPU = "GPU"
+# Memory a local worker process needs at least: measured 100 MB idle and 250 MB after baking the
+# pages of a small scene (tests/core/test_farm.py's crates); larger scenes need more.
+WORKER_MEMORY = 512 << 20
+
+
+def local_workers(asked: int) -> tuple[int, Optional[str]]:
+    """(the worker processes a ``local:asked`` cluster starts: at most one per core and one per
+    WORKER_MEMORY of the bake's memory budget, a warning when that is fewer than asked, else
+    None)."""
+    from .lightmap.budget import memory_budget
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    budget = memory_budget()
+    most = max(1, min(cores, budget // WORKER_MEMORY))
+    if asked <= most:
+        return asked, None
+    return most, (f"--scheduler local:{asked} asks for {asked} worker processes; this machine runs "
+                  f"{most} ({cores} cores, {budget / 2**30:.1f} GB for the bake at "
+                  f"{WORKER_MEMORY >> 20} MB a worker at least): {most} workers instead")
 
 
 def _distributed():
@@ -61,7 +80,8 @@ def _distributed():
 class Farm:
     """A connection to a Dask scheduler: ``tcp://HOST:PORT`` (a running ``dask scheduler``) or
     ``local:N`` (a cluster of N worker processes on this machine, made here and closed with the
-    farm). Use as a context manager or call ``close()``.
+    farm; at most what the machine can run, see :func:`local_workers`, with a warning in
+    ``warnings``). Use as a context manager or call ``close()``.
 
     Raises SettingsError (a BakeError), before any work, when the scheduler cannot be reached or
     no worker joins it within WORKER_TIMEOUT seconds; BakeError without ``distributed``.
@@ -74,9 +94,11 @@ class Farm:
         self.cluster = None
         self.tasks: list = []       # keys of the tasks submitted, for the report
         self.timings: dict = {}     # scatter, wait …: seconds on the coordinator
+        self.warnings: list = []    # e.g. a local cluster smaller than asked
         try:
             if address.startswith("local:"):
-                workers = int(address.partition(":")[2])
+                workers, capped = local_workers(int(address.partition(":")[2]))
+                self.warnings += [capped] if capped else []
                 # the workers share this machine's cores: each splits its launches over its share
                 share = str(max(1, device_mod.cpu_threads() // workers))
                 self.cluster = distributed.LocalCluster(

@@ -166,3 +166,52 @@ def test_the_threads_a_launch_is_split_over_can_be_set_for_workers_sharing_a_mac
     monkeypatch.setenv(device.THREADS_VARIABLE, "many")
     with pytest.raises(SettingsError, match="whole number of threads"):
         device.cpu_threads()
+
+
+def test_a_local_cluster_of_more_workers_than_the_machine_runs_is_capped_with_a_warning(monkeypatch):
+    """``local:1000`` on this machine starts one worker per core at most (before: 1000 processes,
+    51 of them within 10 s on 2 cores, and counting). The cluster is recorded, not started."""
+    started = []
+
+    class Cluster:
+        def __init__(self, n_workers, **kwargs):
+            started.append((n_workers, kwargs["env"][device.THREADS_VARIABLE]))
+
+        def close(self):
+            pass
+
+    class Client:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def wait_for_workers(self, n, timeout):
+            pass
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(distributed, "LocalCluster", Cluster)
+    monkeypatch.setattr(distributed, "Client", Client)
+    cores = len(os.sched_getaffinity(0))
+    with farm.Farm("local:1000") as f:
+        pass
+    workers = farm.local_workers(1000)[0]
+    assert 1 <= workers <= cores
+    assert started == [(workers, str(max(1, device.cpu_threads() // workers)))]
+    assert len(f.warnings) == 1 and "local:1000 asks for 1000 worker processes" in f.warnings[0]
+    with farm.Farm("local:1") as f:
+        pass
+    assert started[-1][0] == 1 and f.warnings == []
+
+
+def test_local_workers_are_bounded_by_cores_and_by_memory(monkeypatch):
+    import radiosity_baker.core.lightmap.budget as budget
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(8)))
+    monkeypatch.setattr(budget, "memory_budget", lambda: 64 * farm.WORKER_MEMORY)
+    assert farm.local_workers(8) == (8, None)
+    workers, warning = farm.local_workers(9)
+    assert workers == 8 and "this machine runs 8 (8 cores" in warning
+    monkeypatch.setattr(budget, "memory_budget", lambda: 3 * farm.WORKER_MEMORY + 1)
+    workers, warning = farm.local_workers(8)
+    assert workers == 3 and "8 worker processes" in warning and "3 workers instead" in warning
