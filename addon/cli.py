@@ -7,7 +7,7 @@ is never written: results reach disk only through ``--save`` (which may name the
 Every output is written under a temporary name beside its target, checked, and moved into place
 with the others at the end, so a failed bake or a full disk leaves the targets as they were.
 Exit status: 0 done, 1 the bake failed, 2 bad arguments or unreadable input / unwritable output,
-130 cancelled (Ctrl-C).
+130 cancelled (Ctrl-C), 143 stopped by SIGTERM (cleaned up as after Ctrl-C).
 """
 from __future__ import annotations
 
@@ -141,6 +141,9 @@ def main(argv: list[str]) -> int:
         return run(args)
     except (UsageError, SettingsError, OutputError) as exc:
         return _error(str(exc), 2)
+    except Terminated as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)  # outputs were left as they were
+        return 143
     except (BakeCancelled, KeyboardInterrupt):
         print(f"{PROG}: bake cancelled", file=sys.stderr)  # outputs were left as they were
         return 130
@@ -225,27 +228,48 @@ def _bake(args) -> int:
     return 0
 
 
+class Terminated(BakeCancelled):
+    """The bake stopped because the process was sent SIGTERM (exit status 143)."""
+
+
 @contextmanager
 def _ctrl_c_stops(job: BakeJob):
     """The first Ctrl-C (SIGINT) asks ``job`` to stop at its next check, which raises
     BakeCancelled; a second one interrupts at once. A KeyboardInterrupt raised wherever the main
     thread happens to be can land in a finaliser (a Warp array's ``__del__``), where Python prints
-    and drops it, and the bake then ran to its end and exited 0 (seen in CI). Where SIGINT is not
-    Python's default handler (Blender's own, under ``blender -c``), nothing changes."""
+    and drops it, and the bake then ran to its end and exited 0 (seen in CI). SIGTERM stops the
+    bake the same way (its temporary files and xatlas workers cleaned up) and raises Terminated; a
+    second SIGTERM ends the process at once. Where SIGINT is not Python's default handler
+    (Blender's own, under ``blender -c``), nothing changes."""
     if (threading.current_thread() is not threading.main_thread()
             or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
         yield
         return
+    terminated = []
 
     def stop(signum, frame):
         job.stop_soon()
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
+    def term(signum, frame):
+        terminated.append(signum)
+        job.stop_soon()
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+    handle_term = signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
     signal.signal(signal.SIGINT, stop)
+    if handle_term:
+        signal.signal(signal.SIGTERM, term)
     try:
         yield
+    except BakeCancelled:
+        if terminated:
+            raise Terminated("bake stopped (SIGTERM)") from None
+        raise
     finally:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+        if handle_term:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _check_distinct(blend: Path, outputs: dict) -> None:

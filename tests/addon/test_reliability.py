@@ -727,8 +727,9 @@ def _until(condition, seconds: float) -> bool:
 @pytest.mark.parametrize("how", ["Ctrl-C", "SIGINT", "SIGTERM", "kill -9"])
 def test_stopping_a_bake_while_it_unwraps_stops_the_xatlas_workers(empty_scene, tmp_path, how):
     """A 20480-face sphere keeps xatlas busy for seconds: Ctrl-C (to the terminal's process group)
-    or SIGINT to the bake alone ends the bake with status 130 and its workers at once; SIGTERM or
-    kill -9 of the bake ends the workers with it."""
+    or SIGINT to the bake alone ends the bake with status 130 and its workers at once, SIGTERM
+    likewise with status 143, all three leaving no temporary folder; kill -9 of the bake ends the
+    workers with it."""
     bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=6)
     lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
     lamp.location = (0.0, 0.0, 3.0)
@@ -756,6 +757,12 @@ def test_stopping_a_bake_while_it_unwraps_stops_the_xatlas_workers(empty_scene, 
         if how in ("Ctrl-C", "SIGINT"):
             assert proc.returncode == 130, err
             assert err.strip().splitlines()[-1] == "radiosity_baker: bake cancelled"
+        if how == "SIGTERM":  # before: exit 143 without a word, the workers' folder left behind
+            assert proc.returncode == 143, err
+            assert err.strip().splitlines()[-1] == "radiosity_baker: bake stopped (SIGTERM)"
+        if how != "kill -9":  # nothing left: the workers' folder, the output folder
+            assert not list((tmp_path / "cache").glob("rb-xatlas-*"))
+            assert not (tmp_path / "maps").exists()
     finally:
         proc.kill()
         proc.wait()
