@@ -53,7 +53,7 @@ def _cache_dir():
     package = __package__.rpartition(".")[0]
     if package.startswith("bl_ext."):
         return Path(bpy.utils.extension_path_user(package, path="unwrap_cache", create=True))
-    return None  # core's default: a folder in the system temp dir
+    return None  # core's default: the user's cache folder (core.lightmap.cache)
 
 
 def output_folder(settings) -> Path:

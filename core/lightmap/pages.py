@@ -42,7 +42,7 @@ class LightmapObject:
 @dataclass
 class LightmapRequest:
     """What to lightmap. python: interpreter for the xatlas worker (default sys.executable);
-    cache_dir: unwrap cache (default ``unwrap.default_cache_dir()``); sizes: {layout group: {page
+    cache_dir: unwrap cache (default ``cache.default_dir()``); sizes: {layout group: {page
     index: (page size, density)}} to keep for reused UVs (an animation's later frames keep the
     first frame's pages, ``LightmapResult.sizes``), None to size them by the density."""
 

@@ -24,6 +24,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from ..errors import BakeError
+from . import cache
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
@@ -56,12 +57,6 @@ class Layout:
     page: list
     density: list
     tri_uv: list
-
-
-def default_cache_dir() -> Path:
-    """Where unwraps are cached: ``$RADIOSITY_BAKER_CACHE`` or a folder in the system temp dir."""
-    env = os.environ.get("RADIOSITY_BAKER_CACHE")
-    return Path(env) if env else Path(tempfile.gettempdir()) / "radiosity_baker_unwrap"
 
 
 def _clean(mesh: ChartMesh):
@@ -107,15 +102,14 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
 
     python: interpreter for the workers (default ``sys.executable``; inside Blender the add-on
     passes Blender's Python). Results are cached in ``cache_dir`` (default
-    :func:`default_cache_dir`): a mesh's charts by its positions, triangles, density and padding,
+    ``cache.default_dir``, see ``core.lightmap.cache``): a mesh's charts by its positions, triangles, density and padding,
     a group's pages by its charts and options, so an unchanged scene skips xatlas and a changed
     mesh is cut again alone. Meshes measured in millimetres are laid out as well as metre-sized
     ones (the worker rescales them for xatlas). Raises BakeError when a mesh has no triangle with
     area or xatlas fails. ``check`` is called every 0.2 s while the workers run and raises (e.g.
     BakeCancelled) to stop them.
     """
-    cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    cache_dir.mkdir(parents=True, exist_ok=True)
+    cache_dir = cache.prepare(Path(cache_dir) if cache_dir is not None else cache.default_dir())
     cleaned = [[_clean(m) for m in group] for group in groups]
     for group, items in zip(groups, cleaned):
         for mesh, (keep, _, _) in zip(group, items):
@@ -127,7 +121,7 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
     for group, items, keys in zip(groups, cleaned, chart_keys):
         for mesh, (_, pos, idx), key in zip(group, items, keys):
             jobs[key] = {"pos": pos, "idx": idx, "density": np.array(float(mesh.density))}
-    charts = _cached(cache_dir, "c", jobs, lambda todo: _run(
+    charts = cache.cached(cache_dir, "c", jobs, lambda todo: _run(
         "charts", todo, {"padding": np.array(int(padding)), "max_size": np.array(int(max_size))}, python,
         cache_dir, check=check))
     packs, names = {}, {}
@@ -139,8 +133,8 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
     pack_jobs = {key: {f"m{m}_{name}": charts[k][name] for m, k in enumerate(keys)
                        for name in ("uv", "idx", "chart", "density")} | {"meshes": np.array(len(keys))}
                  for key, keys in packs.items()}
-    packed = _cached(cache_dir, "p", pack_jobs, lambda todo: _run("pack", todo, options, python, cache_dir,
-                                                                  names=names, check=check))
+    packed = cache.cached(cache_dir, "p", pack_jobs, lambda todo: _run(
+        "pack", todo, options, python, cache_dir, names=names, check=check))
     layouts = []
     for group, items, keys in zip(groups, cleaned, chart_keys):
         data = packed[_key(*keys, int(max_size), int(padding), bool(many))]
@@ -158,27 +152,6 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
             tri_uv.append(out)
         layouts.append(Layout(sizes=sizes, page=pages, density=densities, tri_uv=tri_uv))
     return layouts
-
-
-def _cached(cache_dir: Path, kind: str, jobs: dict, compute) -> dict:
-    """{key: result dict} for ``jobs`` ({key: inputs}): read from ``cache_dir`` where cached, the
-    rest from ``compute({key: inputs}) -> {key: result}`` and stored."""
-    out, todo = {}, {}
-    for key, job in jobs.items():
-        path = cache_dir / f"{kind}-{key}.npz"
-        if path.is_file():
-            try:
-                with np.load(path) as data:
-                    out[key] = {name: data[name] for name in data.files}
-                continue
-            except (OSError, KeyError, ValueError):
-                pass  # a damaged cache entry: compute again
-        todo[key] = job
-    if todo:
-        for key, result in compute(todo).items():
-            out[key] = result
-            np.savez(cache_dir / f"{kind}-{key}.npz", **result)
-    return out
 
 
 def _uv_areas(tri_uv: np.ndarray) -> np.ndarray:
