@@ -216,8 +216,12 @@ class Problem:
 
 
 def _reflecting(scene: SceneData, stages: Stages) -> SceneData:
-    """``scene`` with its albedo clamped into [0, 1] (``SceneData.reflecting``), warning with the
-    names of the objects whose albedo was outside."""
+    """``scene`` without light it cannot bake (``SceneData.emitting``) and with its albedo clamped
+    into [0, 1] (``SceneData.reflecting``), warning with the names of the lamps and objects
+    changed."""
+    scene, messages = scene.emitting()
+    for message in messages:
+        stages.warn(message)
     scene, names = scene.reflecting()
     if names:
         stages.warn(f"albedo outside [0, 1] clamped to it in {', '.join(names)}: a surface cannot "

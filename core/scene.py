@@ -148,6 +148,34 @@ class SceneData:
             names = sorted({self.object_names[i] for i in np.unique(self.tri_object[bad_t])})
             raise ValueError(f"NaN or infinite vertex positions in {', '.join(names) or 'the scene'}")
 
+    def emitting(self) -> tuple["SceneData", list]:
+        """This scene without the light it cannot bake: lamps whose power is negative or not a
+        finite number left out, triangles' emission that is negative or not finite set to none
+        (beyond FLT_MAX/2 counts as infinite: Blender stores infinity as FLT_MAX).
+        Also the messages naming them (empty when nothing changed)."""
+        messages = []
+        limit = np.finfo(np.float32).max / 2  # Blender stores an infinite value as ±FLT_MAX
+        power = np.asarray(self.lamps.power, np.float64)
+        with np.errstate(invalid="ignore"):
+            bad_lamp = ~((power < limit) & (power >= 0)).all(axis=1)
+        scene = self
+        if bad_lamp.any():
+            named = [f"'{self.lamps.names[i] if i < len(self.lamps.names) else f'lamp {i}'}' "
+                     f"(power {_power_text(power[i])})" for i in np.flatnonzero(bad_lamp)]
+            messages.append(f"lamp {', '.join(named)} left out: a lamp's power (a sun's strength) "
+                            "must be a finite number ≥ 0 (a negative one would take light away)")
+            scene = replace(scene, lamps=self.lamps.take(~bad_lamp))
+        emission = np.asarray(self.emission, np.float64)
+        with np.errstate(invalid="ignore"):
+            bad_tri = ~((emission < limit) & (emission >= 0)).all(axis=1)
+        if bad_tri.any():
+            names = sorted({self.object_names[i] for i in np.unique(self.tri_object[bad_tri])})
+            messages.append(f"emission that is negative, infinite or not a number in "
+                            f"{', '.join(names)}: left out (no light from those faces)")
+            fixed = np.where(bad_tri[:, None], 0.0, emission).astype(np.float32)
+            scene = replace(scene, emission=fixed)
+        return scene, messages
+
     def reflecting(self) -> tuple["SceneData", list]:
         """This scene with each albedo channel clamped into [0, 1] (NaN read as 0), as Cycles
         clamps a Principled Base Color: a surface reflecting more than it receives would make the
@@ -173,3 +201,11 @@ class SceneData:
         return replace(self, positions=(p - centre).astype(np.float32), lamps=lamps,
                        origin=np.asarray(self.origin, np.float64) + centre)
 
+
+def _power_text(power: np.ndarray) -> str:
+    """A lamp's float[3] colour × power for a message: one number where the channels agree."""
+    if np.all(np.isnan(power)):
+        return "NaN"
+    power = np.where(np.abs(power) >= np.finfo(np.float32).max / 2, np.sign(power) * np.inf, power)
+    values = {f"{x:g}" for x in power}
+    return values.pop() if len(values) == 1 else "(" + ", ".join(f"{x:g}" for x in power) + ")"

@@ -2,6 +2,7 @@
 import threading
 
 import bpy
+import numpy as np
 import pytest
 
 from radiosity_baker.addon import cli
@@ -85,3 +86,46 @@ def test_cli_nan_geometry_is_one_line_naming_the_object(empty_scene, tmp_path, c
     assert cli.main(["bake", str(path), "--method", "direct"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("radiosity_baker: error:") and "Broken" in err[-1]
+
+
+def _second_lamp(scene, energy: float):
+    light = bpy.data.lights.new("Odd", 'POINT')
+    light.energy = energy
+    lamp = bpy.data.objects.new("Odd", light)
+    lamp.location = (1.0, 1.0, 2.0)
+    scene.collection.objects.link(lamp)
+
+
+@pytest.mark.parametrize("energy, shown", [(-1000.0, "power -1000"), (float("nan"), "power NaN"),
+                                           (float("inf"), "power inf")])
+def test_a_lamp_of_negative_or_nan_power_is_left_out_with_a_warning_naming_it(empty_scene, energy, shown):
+    """Before: a negative lamp was dropped without a word, and a NaN one was blamed on albedo.
+    (Blender stores an infinite power as FLT_MAX.)"""
+    lit_ground(empty_scene)
+    fast_settings(empty_scene)
+    plain = BakeJob(empty_scene.radiosity_baker.to_settings())
+    plain.run_sync(bpy.context)
+    expected = plain.result.output
+    _second_lamp(empty_scene, energy)
+    job = BakeJob(empty_scene.radiosity_baker.to_settings())
+    warnings = job.run_sync(bpy.context)
+    odd = [w for w in warnings if "'Odd'" in w]
+    assert len(odd) == 1 and shown in odd[0] and "left out" in odd[0], warnings
+    assert not any("albedo" in w for w in warnings)
+    assert (job.result.output == expected).all()  # the bake of the good lamp alone
+
+
+@pytest.mark.parametrize("strength", [float("inf"), float("nan"), -5.0])
+def test_emission_of_inf_nan_or_negative_strength_is_left_out_with_a_warning_naming_the_object(
+        empty_scene, strength):
+    lit_ground(empty_scene)
+    fast_settings(empty_scene)
+    mat = bpy.data.materials.new("Glow")
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Emission Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    bsdf.inputs["Emission Strength"].default_value = strength
+    bpy.data.objects[OCCLUDER].data.materials.append(mat)
+    job = BakeJob(empty_scene.radiosity_baker.to_settings())
+    warnings = job.run_sync(bpy.context)
+    assert any("emission" in w and OCCLUDER in w and "left out" in w for w in warnings), warnings
+    assert np.isfinite(job.result.output).all()
