@@ -202,7 +202,8 @@ class _Materials:
 
     def paint(self, me, materials: list, loops: np.ndarray, tri_material: np.ndarray,
               object_name: str):
-        """Per-triangle albedo and emission, float32[T,3] each.
+        """(per-triangle albedo and emission, float32[T,3] each; whether some triangle has no
+        material: grey 0.8).
 
         materials: the object's material per slot (None for an empty slot); loops: int32[T,3]
         corners of each triangle; tri_material: int32[T] slot index of each triangle.
@@ -214,19 +215,20 @@ class _Materials:
         # Blender clamps a material index past the last slot to the last slot.
         slot = np.clip(tri_material, 0, len(materials) - 1)
         uv_cache: dict[str, np.ndarray] = {}
+        bare = False
         for s in np.unique(slot):
             mat = materials[s]
             mask = slot == s
             if mat is None:
                 albedo[mask] = _GREY
-                self._warn(f"object {object_name} has no material: grey 0.8 used")
+                bare = True
                 continue
             shading = self.shading(mat)
             albedo[mask] = self._evaluate(shading.albedo, me, loops, mask, uv_cache, object_name)
             if shading.emission_strength != 0.0:
                 emission[mask] = shading.emission_strength * self._evaluate(
                     shading.emission, me, loops, mask, uv_cache, object_name)
-        return albedo, emission
+        return albedo, emission, bare
 
     def _evaluate(self, colour, me, loops, mask, uv_cache, object_name):
         if not isinstance(colour, _Texture):
@@ -311,7 +313,8 @@ class _Geometry:
 
     positions: float32[V,3] vertices; corner_normals: float32[C,3] shading normal per face corner;
     triangles: int32[T,3] vertex indices; albedo, emission: float32[T,3]; corner_vert: int32[C];
-    loops: int32[T,3] face corners of each triangle; num_vertices: mesh vertex count.
+    loops: int32[T,3] face corners of each triangle; num_vertices: mesh vertex count; bare:
+    some triangle has no material (grey 0.8).
     """
 
     positions: np.ndarray
@@ -322,6 +325,7 @@ class _Geometry:
     corner_vert: np.ndarray
     num_vertices: int
     loops: np.ndarray
+    bare: bool = False
 
 
 def _read_attribute(me, name, domain_size, width, dtype, fallback):
@@ -358,10 +362,10 @@ def _read_mesh(me, materials: list, palette: _Materials, object_name: str):
         poly_material = _read_attribute(me, "material_index", len(me.polygons), 1, np.int32, None)
     else:
         poly_material = np.zeros(len(me.polygons), np.int32)
-    albedo, emission = palette.paint(me, materials, loops, poly_material[tri_poly], object_name)
+    albedo, emission, bare = palette.paint(me, materials, loops, poly_material[tri_poly], object_name)
     return _Geometry(positions=positions, corner_normals=corner_normals,
                      triangles=corner_vert[loops], albedo=albedo, emission=emission,
-                     corner_vert=corner_vert, num_vertices=nv, loops=loops)
+                     corner_vert=corner_vert, num_vertices=nv, loops=loops, bare=bare)
 
 
 def _object_materials(ob, me) -> list:
@@ -480,6 +484,8 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
     seen: set = set()
     no_faces: list[str] = []
     instancers: set = set()
+    converted: list[str] = []  # curves, text …: in the scene's light, not written
+    bare: list[str] = []       # objects with faces of no material
     offset = 0
     triangle_offset = 0
 
@@ -492,6 +498,8 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
                 continue
             # Curves, text, surfaces and metaballs arrive as a mesh instance of themselves.
             name = parent.name if ob.original == parent else f"{parent.name}/{ob.name}"
+            if ob.original == parent and parent.type != "MESH" and ob.type == "MESH":
+                converted.append(name)
         else:
             original = ob.original
             seen.add(original.name)
@@ -522,6 +530,8 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
             no_faces.append(name)
             continue
 
+        if geom.bare:
+            bare.append(name)
         positions, normals, triangles, loops = _transform(geom, matrix, name)
         parts.append((positions, normals, triangles + offset, geom.albedo, geom.emission,
                       len(names)))
@@ -537,8 +547,17 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
         triangle_offset += triangles.shape[0]
 
     # An object whose geometry nodes output only instances has no faces of its own: not news.
-    warnings.extend(f"{n} has no faces: skipped" for n in dict.fromkeys(no_faces)
-                    if n not in instancers)
+    warnings += _fold([n for n in dict.fromkeys(no_faces) if n not in instancers],
+                      "{name} has no faces: skipped", "{count} objects have no faces: skipped ({names})")
+    warnings += _fold(list(dict.fromkeys(bare)), "object {name} has no material: grey 0.8 used",
+                      "{count} objects have no material: grey 0.8 used ({names})")
+    if receiver_names is None:
+        warnings += _fold(list(dict.fromkeys(converted)),
+                          "{name} casts light and shadow but takes no results (only meshes do): "
+                          "convert it to a mesh (Object › Convert › Mesh) to bake it",
+                          "{count} curve, text, surface or metaball objects cast light and shadow but "
+                          "take no results (only meshes do): {names}; convert them to meshes "
+                          "(Object › Convert › Mesh) to bake them")
     _warn_unseen(depsgraph, collections, seen, warnings)
     if receiver_names is not None:
         made = {t.object_name for t in targets}
@@ -599,6 +618,20 @@ def _is_copy_of_rendered(ob, collections: set, receiver_names) -> bool:
     if source is None or receiver_names is not None and ob.name in receiver_names:
         return False
     return _renders(source, collections)
+
+
+# Objects a folded warning names before saying how many more.
+FOLD = 5
+
+
+def _fold(names: list, one: str, many: str) -> list[str]:
+    """One warning for the objects ``names`` (in order, each once), none for none: ``one`` with
+    {name} for one object, else ``many`` with {count} and {names} (the first FOLD names, then how
+    many more), so ten thousand objects make one line, not ten thousand."""
+    if len(names) <= 1:
+        return [one.format(name=n) for n in names]
+    shown = ", ".join(names[:FOLD]) + (f" and {len(names) - FOLD:,} more" if len(names) > FOLD else "")
+    return [many.format(count=f"{len(names):,}", names=shown)]
 
 
 def _warn_unseen(depsgraph, collections: set, seen: set, warnings: list) -> None:

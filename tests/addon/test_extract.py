@@ -142,6 +142,23 @@ def test_text_and_beveled_curve_are_converted_to_triangles():
     assert counts["Label"] > 0 and counts["Ring"] > 0
     assert "Label is not a mesh: its results cannot be written" in ex.warnings
     assert ex.targets == []
+    # baking everything, they still take no results: said, not silent (before: no word)
+    everything = extract()
+    said = [w for w in everything.warnings if "cast light and shadow but take no results" in w]
+    assert len(said) == 1 and "2 curve, text" in said[0] and "Label" in said[0] and "Ring" in said[0]
+    assert "Convert › Mesh" in said[0]
+
+
+def test_ten_thousand_objects_without_a_material_make_one_warning_with_the_count():
+    mesh = bpy.data.meshes.new("Tile")
+    mesh.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [], [(0, 1, 2)])
+    for i in range(10_000):
+        ob = bpy.data.objects.new(f"Tile{i:05d}", mesh)
+        ob.location.x = 2 * i
+        bpy.context.scene.collection.objects.link(ob)
+    warnings = extract().warnings
+    assert warnings == ["10,000 objects have no material: grey 0.8 used (Tile00000, Tile00001, "
+                        "Tile00002, Tile00003, Tile00004 and 9,995 more)"]
 
 
 def test_hide_render_objects_collections_and_instancers_are_excluded():
