@@ -309,12 +309,29 @@ def _export(args) -> int:
         bpy.ops.wm.open_mainfile(filepath=str(blend))
     except RuntimeError as exc:
         raise UsageError(f"cannot open {blend}: {_first_line(exc)}") from None
+    _check_baked(blend, args.color_attribute)
     with Staging() as staging:
         _write_gltf(staging, target, args.lightmap_format, args.color_attribute,
                     lightmaps=not args.no_lightmaps)
         staging.commit()
     print(f"{PROG}: exported {target}")
     return 0
+
+
+def _check_baked(blend: Path, color_attribute) -> None:
+    """Raise UsageError unless the open file holds what ``export`` is asked to carry: the color
+    attribute named (on some mesh of the scene), or, without one, meshes a bake lightmapped (their
+    lightmaps, or with ``--no-lightmaps`` their ``Lightmap`` UV maps)."""
+    meshes = [ob for ob in bpy.context.scene.objects if ob.type == "MESH"]
+    if color_attribute:
+        if not any(ob.data.color_attributes.get(color_attribute) is not None for ob in meshes):
+            raise UsageError(f"--color-attribute {color_attribute}: no mesh of {blend.name} has a "
+                             f"color attribute of that name (a bake writes the one --attribute "
+                             f"names, 'Lighting' by default); bake it first or name another")
+    elif not any(gltf.lightmap_image(ob) is not None for ob in meshes):
+        raise UsageError(f"{blend.name} holds nothing baked to export: no mesh has a lightmap from "
+                         f"a bake, and no --color-attribute was named; bake it first (bake "
+                         f"{blend.name} --target lightmap --save OUT.blend) or name a color attribute")
 
 
 def _check_glb(path: Path) -> None:

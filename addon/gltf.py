@@ -161,7 +161,7 @@ class glTF2ExportUserExtension:  # noqa: N801 - the name Blender's glTF exporter
         lightmap."""
         if not self.enabled or gltf2_node.mesh is None or blender_object is None:
             return
-        image = _page_image(blender_object)
+        image = lightmap_image(blender_object)
         if image is None:
             return
         for prim in gltf2_node.mesh.primitives:
@@ -389,13 +389,13 @@ def _lightmaps_of(material) -> list:
         if ob.type != "MESH" or not any(s.material is not None and s.material.original == material
                                         for s in ob.material_slots):
             continue
-        image = _page_image(ob)
+        image = lightmap_image(ob)
         if image is not None:
             found.append(image)
     return found
 
 
-def _page_image(ob):
+def lightmap_image(ob):
     """The lightmap image of mesh object ``ob`` (its ``OBJECT_TAG``), or None when a bake did not
     lightmap it, the image is gone, or the object has no ``Lightmap`` UV map."""
     page = ob.original.get(OBJECT_TAG)

@@ -97,3 +97,20 @@ def test_a_hot_spot_clipped_by_an_8bit_lightmap_is_a_warning_giving_its_share(
     assert f"warning: lightmap Lightmap.rgbm.png: {share} of its lit texels" in err
     assert f"lightmap Lightmap: {share} of its lit texels" in out + err  # the export's log
     assert "--lightmap-format hdr" in err
+
+
+@pytest.mark.parametrize("extra, words", [
+    ([], ["in.blend holds nothing baked to export", "no mesh has a lightmap from a bake"]),
+    (["--no-lightmaps"], ["holds nothing baked to export", "no mesh has a lightmap from a bake"]),
+    (["--color-attribute", "Lighting"], ["--color-attribute Lighting: no mesh of in.blend has a "
+                                         "color attribute of that name"])],
+    ids=["never baked", "never baked, lightmaps left out", "missing attribute"])
+def test_exporting_what_the_file_does_not_hold_is_an_error_and_writes_no_glb(ground_blend, tmp_path,
+                                                                             capfd, extra, words):
+    """Before: exit 0 and a GLB without lightmaps or colours, silently."""
+    glb = tmp_path / "out.glb"
+    assert cli.main(["export", str(ground_blend), str(glb), *extra]) == 2
+    err = capfd.readouterr().err
+    for word in words:
+        assert word in err, err
+    assert not glb.exists()
