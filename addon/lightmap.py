@@ -177,8 +177,10 @@ def write_files(result, settings, staging=None, frame=None, folder=None) -> tupl
                 clipped = encodings.clip_warning(page.rgb, extras["range"],
                                                  f"lightmap {stem}.{fmt}.png")
                 warnings += [clipped] if clipped else []
+            warnings += _replacing(paths[page.stem], page.objects)
             with staging.writing(paths[page.stem]) as temp:
-                encodings.write(temp, page.rgb, "half" if fmt in encodings.EIGHT_BIT else fmt)
+                encodings.write(temp, page.rgb, "half" if fmt in encodings.EIGHT_BIT else fmt,
+                                page.objects)
                 files.verify(temp, page.size)
             if page.l1 is not None:  # a directional bake: its layout beside the page
                 layout = settings.directional
@@ -323,6 +325,18 @@ def may_replace(folder: Path, path: Path) -> bool:
     name = path.name.lower()
     return (name.startswith(ATLAS_NAME.lower()) and path.suffix.lower() in (".exr", ".png")
             and same_file(path.parent, folder))
+
+
+def _replacing(path: Path, objects: list) -> list:
+    """A warning when ``path`` holds the lightmap of other objects, which an earlier bake into the
+    folder wrote (e.g. another ``--objects`` bake): a .blend saved by it shows this page now."""
+    before = files.objects_of(path) if path.is_file() else None
+    if before is None or sorted(before) == sorted(objects):
+        return []
+    return [f"{path.name} in {path.parent} held the lightmap of {', '.join(before)} (an earlier "
+            f"bake into this folder) and now holds {', '.join(objects)}'s: a .blend saved by that "
+            "bake shows this lightmap now; bake those objects together, or give each --objects "
+            "bake its own --output"]
 
 
 def _file_names(pages) -> tuple[dict, list]:

@@ -114,13 +114,14 @@ def step(rgba: np.ndarray, encoding: str, value_range: float) -> np.ndarray:
     return ((value_range / 255.0) / np.maximum(a, 1.0 / 255.0) / 255.0).astype(np.float32)
 
 
-def write(path: Path, rgb: np.ndarray, lightmap_format: str) -> dict:
+def write(path: Path, rgb: np.ndarray, lightmap_format: str, objects=None) -> dict:
     """Write float32[H,W,3] linear ``rgb`` (row 0 bottom) in ``lightmap_format`` (a key of
-    ``SUFFIX``; the path's suffix is the caller's). Returns what an engine needs to decode it:
+    ``SUFFIX``; the path's suffix is the caller's); an EXR keeps ``objects`` (the names of the
+    objects it holds, ``files.objects_of``). Returns what an engine needs to decode it:
     {"encoding": format, "range": float} for the 8-bit encodings, {"encoding": format} otherwise.
     Raises BakeError naming the path when it cannot be written."""
     if lightmap_format in ("half", "float"):
-        files.write_exr(path, rgb, lightmap_format)
+        files.write_exr(path, rgb, lightmap_format, objects)
         return {"encoding": lightmap_format}
     oiio = files._oiio()
     h, w = rgb.shape[:2]

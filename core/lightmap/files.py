@@ -23,6 +23,8 @@ def _oiio():
 
 # The largest finite half float: larger values would be stored as infinite.
 HALF_MAX = 65504.0
+# The header attribute naming the objects a lightmap file holds (one name a line).
+META_OBJECTS = "radiosity_baker:objects"
 
 
 def exr_precision(rgb: np.ndarray, precision: str) -> str:
@@ -33,11 +35,12 @@ def exr_precision(rgb: np.ndarray, precision: str) -> str:
     return precision
 
 
-def write_exr(path: Path, rgb: np.ndarray, precision: str = "half") -> None:
+def write_exr(path: Path, rgb: np.ndarray, precision: str = "half", objects=None) -> None:
     """Write float32[H,W,3] linear RGB (row 0 bottom) as an RGBA OpenEXR with zip compression.
 
     precision: ``half`` or ``float`` channels (see :func:`exr_precision`: half only where every
-    value fits it); alpha is 1. Raises BakeError naming the path when it cannot be written.
+    value fits it); alpha is 1. ``objects``: the names of the objects the page holds, kept in
+    the header (:func:`objects_of`). Raises BakeError naming the path when it cannot be written.
     """
     oiio = _oiio()
     h, w = rgb.shape[:2]
@@ -45,6 +48,8 @@ def write_exr(path: Path, rgb: np.ndarray, precision: str = "half") -> None:
     half = exr_precision(rgb, precision) == "half"
     spec = oiio.ImageSpec(w, h, 4, oiio.HALF if half else oiio.FLOAT)
     spec.attribute("compression", "zip")
+    if objects is not None:
+        spec.attribute(META_OBJECTS, "\n".join(objects))
     _write(oiio, path, spec, np.ascontiguousarray(np.flipud(rgba), np.float32))
 
 
@@ -132,6 +137,21 @@ def verify(path: Path, size: Optional[tuple] = None) -> None:
     if detail is not None:
         raise BakeError(f"cannot write {path}: it does not read back whole "
                         f"({(detail.strip().splitlines() or ['unknown error'])[0]})")
+
+
+def objects_of(path: Path) -> Optional[list]:
+    """The names of the objects a lightmap file we wrote holds (:func:`write_exr`'s ``objects``),
+    or None for a file that does not say (not ours, unreadable, an older bake's)."""
+    oiio = _oiio()
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        oiio.geterror()  # clear it: the file is simply not one of ours
+        return None
+    try:
+        names = image.spec().get_string_attribute(META_OBJECTS, "")
+    finally:
+        image.close()
+    return names.split("\n") if names else None
 
 
 def read_exr(path: Path) -> np.ndarray:

@@ -766,3 +766,21 @@ def test_stopping_a_bake_while_it_unwraps_stops_the_xatlas_workers(empty_scene, 
     finally:
         proc.kill()
         proc.wait()
+
+
+def test_a_second_objects_bake_replacing_the_first_ones_lightmap_file_says_so(blend, tmp_path, capsys):
+    """Two ``--objects`` bakes into one folder share the atlas file ``Lightmap.exr``: the second
+    replaces the first's, which the first's saved .blend still shows (before: without a word).
+    Baking the same objects again replaces nothing of another bake: no warning."""
+    maps = tmp_path / "maps"
+    first = bake(capsys, blend, *FAST, *LIGHTMAP, "--objects", GROUND, "--output", maps,
+                 "--save", tmp_path / "ground.blend")
+    assert first.status == 0 and not [w for w in first.err if "held the lightmap" in w]
+    second = bake(capsys, blend, *FAST, *LIGHTMAP, "--objects", OCCLUDER, "--output", maps,
+                  "--save", tmp_path / "occluder.blend")
+    said = [w for w in second.err if "held the lightmap" in w]
+    assert second.status == 0 and len(said) == 1, second.err
+    assert f"Lightmap.exr in {maps} held the lightmap of {GROUND}" in said[0]
+    assert f"now holds {OCCLUDER}'s" in said[0] and "its own --output" in said[0]
+    again = bake(capsys, blend, *FAST, *LIGHTMAP, "--objects", OCCLUDER, "--output", maps)
+    assert again.status == 0 and not [w for w in again.err if "held the lightmap" in w]
