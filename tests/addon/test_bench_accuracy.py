@@ -55,13 +55,15 @@ def test_accuracy_bench_lightmap_mode_places_our_page_on_cycles_curves(tmp_path)
     extrapolated one; each with our error, Cycles' curve and the equal-error speedups."""
     accuracy = script("bench/accuracy.py")
     assert accuracy.main(["--lightmap", "--truth-size", "48", "--samples", "4", "16", "--reference-samples",
-                          "128", "--pair-sizes", "64", "--pair-samples", "4", "16", "--extrapolated-sizes",
+                          "128", "--pair-sizes", "64", "--pair-samples", "4", "256", "--extrapolated-sizes",
                           "96", "--output", str(tmp_path)]) == 0
     (json_path,) = tmp_path.glob("accuracy-lightmap-*.json")
     sizes = json.loads(json_path.read_text())["lightmap"]["sizes"]
     assert list(sizes) == ["48", "64", "96"] and sizes["96"]["extrapolated"]
-    for row in sizes.values():
-        assert [c["samples"] for c in row["cycles"]] == [4, 16]
+    # The pairs' top count resolves our error: ours² = |ours − pair mean|² − σ²/2, and at 16 spp
+    # σ²/2 (relative 0.29² / 2) dwarfs ours² (0.05²), so the estimate was noise around it.
+    for size, row in sizes.items():
+        assert [c["samples"] for c in row["cycles"]] == ([4, 16] if size == "48" else [4, 256])
         assert row["cycles"][1]["relative_rmse"] < row["cycles"][0]["relative_rmse"]
         assert 0 < row["ours_relative_rmse"] < row["cycles"][0]["relative_rmse"]
         assert row["speedup_vs_cycles"] > 0 and row["ours_seconds"] > 0
