@@ -364,8 +364,8 @@ def test_lightmap_files_cut_short_leave_the_output_folder_as_it_was(blend, tmp_p
     assert sorted(p.name for p in maps.iterdir()) == ["Lightmap.exr", "Lightmap.png"]
     real = files.write_exr
 
-    def write_exr(path, rgb, precision="half"):
-        real(path, rgb, precision)
+    def write_exr(path, rgb, precision="half", objects=None):
+        real(path, rgb, precision, objects)
         Path(path).write_bytes(Path(path).read_bytes()[:100])
 
     monkeypatch.setattr(files, "write_exr", write_exr)
