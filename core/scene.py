@@ -20,17 +20,10 @@ SHAPE_RECTANGLE, SHAPE_ELLIPSE = 0, 1
 
 
 def detail_centre(positions: np.ndarray) -> np.ndarray:
-    """float64[3]: the point a scene's coordinates are best taken from, the per-axis median of its
-    vertices float[V,3] (m): where most of its detail is. (Not the centre of its bounds: one huge
-    far plane under a small scene would put that centre hundreds of km away and the small scene's
-    float32 coordinates would lose every shadow and contact there.) It is rounded to a power of two
-    near a thousandth of the vertices' interquartile spread, so that it is exact in binary: a
-    scene moved by an exact step recentres to the same float32 coordinates."""
+    """float64[3]: the point a scene's coordinates are taken from, the centre of the bounds of its
+    vertices float[V,3] (m)."""
     p = np.asarray(positions, np.float64)
-    low, median, high = np.percentile(p, [25.0, 50.0, 75.0], axis=0)
-    spread = np.where(high - low > 0, high - low, 1.0)
-    step = 2.0 ** np.floor(np.log2(spread / 1024.0))
-    return np.round(median / step) * step
+    return 0.5 * (p.min(axis=0) + p.max(axis=0))
 
 
 @dataclass
