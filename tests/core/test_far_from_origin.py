@@ -46,3 +46,17 @@ def test_a_scene_far_from_the_origin_bakes_as_at_the_origin(at_origin, method, o
     bias = metrics.mean_bias(far.lighting, near.lighting)
     print(f"\n{method} at {offset:g} m: relative RMSE {rmse:.5f}, bias {bias:+.5f}")
     assert rmse <= TOLERANCE and abs(bias) <= TOLERANCE
+
+
+def test_an_object_too_far_for_float32_detail_is_named_in_a_warning():
+    """A 1 m ball 1 000 km from a lit 4 m floor: its rays would start metres above it."""
+    floor = shapes.grid(4.0, 16)
+    ball = shapes.icosphere(0.5, 1, inward=False)
+    ball = (ball[0] + np.array([1e6, 0.0, 1.0], np.float32), ball[1], ball[2])
+    lamp = shapes.lamp(LAMP_POINT, position=(0.3, 0.2, 2.5), size=(0.05, 0.0), power=(300.0,) * 3)
+    sc = shapes.scene([(*floor, (0.6,) * 3, (0,) * 3), (*ball, (0.5,) * 3, (0,) * 3)], lamp)
+    result = bake(sc, Settings(method="direct", device="cpu"))
+    said = [w for w in result.warnings if "too far from the rest of the scene" in w]
+    assert len(said) == 1 and "'part1' (" in said[0] and "lost" in said[0], result.warnings
+    assert not [w for w in bake(lit_yard(0.0), Settings(method="direct", device="cpu")).warnings
+                if "too far" in w]
