@@ -580,11 +580,12 @@ def extract_scene(depsgraph, receivers=None) -> Extraction:
     # Positions are kept relative to a point amid the scene's detail, computed in double
     # precision, so a scene far from the world origin keeps float32 precision (core.scene).
     world = cat(0)
-    centre = detail_centre(world)
+    triangles = cat(2).astype(np.int32)
+    centre = detail_centre(world, triangles, tri_object, len(names))
     lamps = _lamps(lamp_items)
     lamps.position = (lamps.position.astype(np.float64) - centre).astype(np.float32)
     scene = SceneData(positions=(world - centre).astype(np.float32), corner_normals=cat(1),
-                      triangles=cat(2).astype(np.int32), tri_object=tri_object, albedo=cat(3),
+                      triangles=triangles, tri_object=tri_object, albedo=cat(3),
                       emission=cat(4), lamps=lamps, object_names=names,
                       ao_distance=_ao_distance(depsgraph.scene), origin=centre)
     # Results come per shading vertex (split by core where a vertex's normals differ).

@@ -19,7 +19,7 @@ import warp as wp
 from . import device as device_mod
 from . import direct as direct_mod
 from . import elements as elements_mod
-from . import rays as rays_mod
+from . import scene as scene_mod
 from . import refine as refine_mod
 from . import surfels as surfels_mod
 from .errors import BakeError
@@ -230,26 +230,17 @@ def _reflecting(scene: SceneData, stages: Stages) -> SceneData:
     return scene
 
 
-# The share of an object's size above which its rays' start (``rays.lift``) counts as losing detail.
-PRECISION = 0.05
-
-
 def _warn_imprecise(scene: SceneData, stages: Stages) -> None:
     """Warn naming the objects of ``scene`` (recentred) that lie so far from its detail, for their
-    size, that a ray leaving them starts more than PRECISION of their size above them
+    size, that a ray leaving them starts more than ``scene_mod.PRECISION`` of their size above them
     (``rays.lift``: the float32 spacing at that distance): their shadows and contacts smaller
     than that are lost."""
-    corners = np.asarray(scene.positions, np.float64)[scene.triangles]  # [T,3,3]
-    count = len(scene.object_names)
-    far, lo, hi = np.zeros(count), np.full((count, 3), np.inf), np.full((count, 3), -np.inf)
-    np.maximum.at(far, scene.tri_object, np.abs(corners).max(axis=(1, 2)))
-    np.minimum.at(lo, scene.tri_object, corners.min(axis=1))
-    np.maximum.at(hi, scene.tri_object, corners.max(axis=1))
-    size = np.where(np.isfinite(lo).all(axis=1), np.linalg.norm(hi - lo, axis=1), np.inf)
-    lift = far * rays_mod.OFFSET
-    bad = np.flatnonzero(lift > PRECISION * size)
+    far, size, _ = scene_mod.object_reach(scene.positions, scene.triangles, scene.tri_object,
+                                       len(scene.object_names), np.zeros(3))
+    bad = np.flatnonzero(scene_mod.losing_detail(far, size))
     if not len(bad):
         return
+    lift = far * scene_mod.RAY_LIFT
     bad = bad[np.argsort(size[bad] / lift[bad])]
     named = ", ".join(f"'{scene.object_names[i]}' ({far[i] / 1e3:,.0f} km away, {size[i]:.3g} m, "
                       f"detail under {lift[i]:.2g} m lost)" for i in bad[:5])

@@ -9,10 +9,13 @@ their neighbours.
 """
 import warp as wp
 
+from .scene import RAY_LIFT
+
 wp.set_module_options({"enable_backward": False})  # no gradients: halves compile time
 
-# ≈ 128 float32 ulps of the point's magnitude plus its feature size.
-OFFSET = 2.0 ** -16
+# ≈ 128 float32 ulps of the point's magnitude plus its feature size (core.scene judges, from the
+# same share, which objects lie too far from the scene's detail).
+OFFSET = RAY_LIFT
 
 
 @wp.func

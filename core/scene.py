@@ -19,11 +19,59 @@ LAMP_POINT, LAMP_SPOT, LAMP_SUN, LAMP_AREA = 0, 1, 2, 3
 SHAPE_RECTANGLE, SHAPE_ELLIPSE = 0, 1
 
 
-def detail_centre(positions: np.ndarray) -> np.ndarray:
-    """float64[3]: the point a scene's coordinates are taken from, the centre of the bounds of its
-    vertices float[V,3] (m)."""
+# A ray leaving a point starts this share of its coordinates' magnitude above it (``core.rays``:
+# about 128 float32 ulps). Detail smaller than that lift is lost: an object whose lift passes
+# PRECISION of its own size loses its shadows and contacts (a warning), and one whose lift passes
+# PRECISION of its mean edge moves the scene's frame where that helps (``detail_centre``).
+RAY_LIFT = 2.0 ** -16
+PRECISION = 0.05
+
+
+def object_reach(positions: np.ndarray, triangles: np.ndarray, tri_object: np.ndarray, count: int,
+                 centre) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(far, size, edge), float64[count] each (m): how far each object's farthest corner lies from
+    ``centre`` float[3] (its largest coordinate, as ``core.rays.lift`` measures it), the diagonal
+    of its bounds and the mean length of its triangles' edges (inf for an object without
+    triangles). positions float[V,3] (m), triangles int[T,3], tri_object int[T]."""
+    corners = np.asarray(positions, np.float64)[triangles] - np.asarray(centre, np.float64)
+    far, lo, hi = np.zeros(count), np.full((count, 3), np.inf), np.full((count, 3), -np.inf)
+    np.maximum.at(far, tri_object, np.abs(corners).max(axis=(1, 2)))
+    np.minimum.at(lo, tri_object, corners.min(axis=1))
+    np.maximum.at(hi, tri_object, corners.max(axis=1))
+    empty = ~np.isfinite(lo).all(axis=1)
+    size = np.where(empty, np.inf, np.linalg.norm(hi - lo, axis=1))
+    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).sum(axis=1)  # [T]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        edge = np.bincount(tri_object, edges, count) / (3.0 * np.bincount(tri_object, None, count))
+    return far, size, np.where(empty, np.inf, edge)
+
+
+def losing_detail(far: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """bool[count]: the objects of :func:`object_reach` whose rays start more than PRECISION of
+    ``scale`` (their size, or their mean edge) above them."""
+    return far * RAY_LIFT > PRECISION * scale
+
+
+def detail_centre(positions: np.ndarray, triangles: np.ndarray, tri_object: np.ndarray,
+                  count: int) -> np.ndarray:
+    """float64[3]: the point a scene's coordinates are taken from (m). The centre of the bounds of
+    its vertices float[V,3], which spreads float32 precision evenly over the scene, unless some
+    object would lose detail of its own edges' size there (:func:`losing_detail`: one huge plane
+    1 km under a small scene puts that centre 500 m from everything lit) and fewer would at the
+    per-axis median of the vertices, where most of the detail is. triangles int[T,3], tri_object
+    int[T]: the objects, ``count`` of them."""
     p = np.asarray(positions, np.float64)
-    return 0.5 * (p.min(axis=0) + p.max(axis=0))
+
+    def lost(centre):
+        far, _, edge = object_reach(p, triangles, tri_object, count, centre)
+        return int(losing_detail(far, edge).sum())
+
+    bounds = 0.5 * (p.min(axis=0) + p.max(axis=0))
+    at_bounds = lost(bounds)
+    if not at_bounds:
+        return bounds
+    median = np.median(p, axis=0)
+    return median if lost(median) < at_bounds else bounds
 
 
 @dataclass
@@ -194,7 +242,7 @@ class SceneData:
         p = np.asarray(self.positions, np.float64)
         if not len(p):
             return self
-        centre = detail_centre(p)
+        centre = detail_centre(p, self.triangles, self.tri_object, len(self.object_names))
         lamps = replace(self.lamps, position=(np.asarray(self.lamps.position, np.float64)
                                                - centre).astype(np.float32))
         return replace(self, positions=(p - centre).astype(np.float32), lamps=lamps,

@@ -48,6 +48,45 @@ def test_a_scene_far_from_the_origin_bakes_as_at_the_origin(at_origin, method, o
     assert rmse <= TOLERANCE and abs(bias) <= TOLERANCE
 
 
+def lamp_over_floor(depth: float):
+    """A 4 m floor with a 1 m ball above it under a point lamp (the ball's shadow on the floor),
+    and, for ``depth`` > 0, one plane 2·depth wide ``depth`` m below: a huge far object whose
+    bounds would put the scene's centre ``depth``/2 away from everything lit."""
+    floor = shapes.grid(4.0, 16)
+    ball = shapes.icosphere(0.5, 2, inward=False)
+    ball = (ball[0] + np.array([0.0, 0.0, 0.8], np.float32), ball[1], ball[2])
+    lamp = shapes.lamp(LAMP_POINT, position=(0.3, 0.2, 2.5), size=(0.05, 0.0), power=(300.0,) * 3)
+    parts = [(*floor, (0.6,) * 3, (0,) * 3), (*ball, (0.7,) * 3, (0,) * 3)]
+    if depth:
+        parts.append((*shapes.grid(2.0 * depth, 1, z=-depth), (0.5,) * 3, (0,) * 3))
+    return shapes.scene(parts, lamp)
+
+
+@pytest.fixture(scope="module")
+def without_plane():
+    return {m: bake(lamp_over_floor(0.0), Settings(method=m, device="cpu", light_samples=16))
+            for m in ("direct", "hierarchical")}
+
+
+@pytest.mark.parametrize("depth", [1e3, 1e4, 1e5, 1e6])
+@pytest.mark.parametrize("method", ["direct", "hierarchical"])
+def test_a_huge_far_plane_keeps_the_shadows_of_a_small_scene(without_plane, method, depth):
+    """The scene's coordinates are taken from amid its detail (``core.scene.detail_centre``)
+    where the centre of its bounds would lose it: before, a 2 000 km plane 1 000 km below erased
+    the ball's shadow (the floor's darkest vertex lit at a quarter of the brightest)."""
+    near = without_plane[method]
+    result = bake(lamp_over_floor(depth), Settings(method=method, device="cpu", light_samples=16))
+    small = result.lighting[:len(near.lighting)]  # the floor's and ball's vertices come first
+    floor = slice(0, 17 * 17)
+    assert near.lighting[floor].min() < 0.02 * near.lighting[floor].max()  # a shadow to keep
+    rmse = metrics.relative_rmse(small, near.lighting)
+    bias = metrics.mean_bias(small, near.lighting)
+    print(f"\n{method}, plane {depth:g} m below: relative RMSE {rmse:.5f}, bias {bias:+.5f}")
+    assert rmse <= TOLERANCE and abs(bias) <= TOLERANCE
+    assert small[floor].min() <= near.lighting[floor].min() + 0.01 * near.lighting[floor].max()
+    assert not result.warnings
+
+
 def test_an_object_too_far_for_float32_detail_is_named_in_a_warning():
     """A 1 m ball 1 000 km from a lit 4 m floor: its rays would start metres above it."""
     floor = shapes.grid(4.0, 16)
