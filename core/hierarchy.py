@@ -104,19 +104,32 @@ class Tree:
         return self.count - 1
 
 
+@wp.func
+def morton(q: wp.vec3, bits: int) -> int:
+    """The Morton code of q (in [0, 1]³, clamped to it) on a grid of 2^bits cells per axis."""
+    cells = 1 << bits
+    x = wp.clamp(int(q[0] * float(cells)), 0, cells - 1)
+    y = wp.clamp(int(q[1] * float(cells)), 0, cells - 1)
+    z = wp.clamp(int(q[2] * float(cells)), 0, cells - 1)
+    code = int(0)
+    for b in range(bits):
+        bit = bits - 1 - b
+        code = code * 8 + ((x >> bit) & 1) * 4 + ((y >> bit) & 1) * 2 + ((z >> bit) & 1)
+    return code
+
+
 @wp.kernel
 def _morton_kernel(offset: int, pos: wp.array(dtype=wp.vec3), lo: wp.vec3, inv_extent: float,
+                   all_lo: wp.vec3, all_inv_extent: float, split: int,
                    keys: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.int32)):
     i = wp.tid() + offset
     q = (pos[i] - lo) * inv_extent
-    code = int(0)
-    for b in range(MORTON_BITS):
-        bit = MORTON_BITS - 1 - b
-        x = wp.clamp(int(q[0] * 1024.0), 0, 1023)
-        y = wp.clamp(int(q[1] * 1024.0), 0, 1023)
-        z = wp.clamp(int(q[2] * 1024.0), 0, 1023)
-        code = code * 8 + ((x >> bit) & 1) * 4 + ((y >> bit) & 1) * 2 + ((z >> bit) & 1)
-    keys[i] = code
+    if split == 0:
+        keys[i] = morton(q, MORTON_BITS)
+    elif wp.min(wp.min(q[0], q[1]), q[2]) >= 0.0 and wp.max(wp.max(q[0], q[1]), q[2]) <= 1.0:
+        keys[i] = morton(q, MORTON_BITS - 1)  # the box's: top cell 0
+    else:  # outside the box: top cell 1, over the bounds of all
+        keys[i] = (1 << (3 * MORTON_BITS - 3)) + morton((pos[i] - all_lo) * all_inv_extent, MORTON_BITS - 1)
     values[i] = i
 
 
@@ -301,6 +314,32 @@ def _next_kernel(offset: int, node0: int, level_end: int, parent: wp.array(dtype
         next_node[g] = next_node[p]
 
 
+# The share of the elements at either end of an axis that may lie outside the Morton grid's box.
+OUTLIERS = 0.01
+
+
+def morton_box(position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) float32[3] (m): the box the Morton grid spans over element positions float[n,3]:
+    their bounds, cut on each axis to the central 98 % of the elements widened by its own span on
+    either side. A scene without outliers keeps its bounds exactly; where the box is cut (a
+    2 000 km plane under a 10 m room, which would leave the room in one cell of a 2 km grid: one
+    node of thousands of children, linked leaf to leaf), the elements in the box and those
+    outside it become the root's two subtrees, each gridded over its own extent at half the
+    resolution (``_morton_kernel``)."""
+    p = np.asarray(position, np.float64)
+    inner_lo, inner_hi = np.percentile(p, [100.0 * OUTLIERS, 100.0 * (1.0 - OUTLIERS)], axis=0)
+    span = inner_hi - inner_lo
+    lo = np.maximum(p.min(axis=0), inner_lo - span)
+    hi = np.minimum(p.max(axis=0), inner_hi + span)
+    return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def _inverse(size: np.ndarray) -> float:
+    """1 / the largest side of a box of sides size float[3] (m); 0 for a point."""
+    extent = float(np.max(size))
+    return 1.0 / extent if extent > 0 else 0.0
+
+
 def build(problem) -> Tree:
     """The tree over the elements of ``problem`` (a ``core.problem.Problem``): its disks are read
     from the device copy (``problem.surfels``); needs at least one element."""
@@ -309,12 +348,15 @@ def build(problem) -> Tree:
     if n < 1:
         raise ValueError("a tree needs at least one element")
     d = dev.name
-    lo = els.position.min(axis=0).astype(np.float32)
-    extent = float((els.position.max(axis=0) - lo).max())
+    all_lo, all_hi = (els.position.min(axis=0).astype(np.float32),
+                      els.position.max(axis=0).astype(np.float32))
+    lo, hi = morton_box(els.position)
+    split = int(np.any(lo > all_lo) or np.any(hi < all_hi))
     keys = wp.empty(2 * n, dtype=wp.int32, device=d)
     order = wp.empty(2 * n, dtype=wp.int32, device=d)
-    device_mod.launch(_morton_kernel, n, [problem.surfels.pos, wp.vec3(lo),
-                                          1.0 / extent if extent > 0 else 0.0, keys, order], dev)
+    device_mod.launch(_morton_kernel, n, [problem.surfels.pos, wp.vec3(lo), _inverse(hi - lo),
+                                          wp.vec3(all_lo), _inverse(all_hi - all_lo), split, keys,
+                                          order], dev)
     wp.utils.radix_sort_pairs(keys, order, n)
 
     # Levels bottom-up: each one the distinct parent cells of the one below.
