@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import hashlib
 import threading
-from dataclasses import replace
+import time
+from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import bpy
@@ -33,6 +34,8 @@ from . import extract, write
 # Seconds between timer ticks.
 INTERVAL = 0.1
 SUFFIX = " Preview"
+# The frame rate is the mean over this many last updates.
+RATE_OVER = 5
 
 _session: Optional["Preview"] = None
 
@@ -52,9 +55,31 @@ def _signature(scene) -> bytes:
     return h.digest()
 
 
+@dataclass
+class Update:
+    """One change followed into the viewport, seconds: ``extract`` (the depsgraph read, main
+    thread), ``solve`` (the worker's bake; ``stages``: its own seconds per stage, as a bake
+    reports them), ``write`` (the preview attribute written, main thread) and ``latency``, from
+    the extraction's start to the written attribute (the three, and the waits between them for
+    the worker and the timer)."""
+
+    extract: float
+    solve: float
+    write: float = 0.0
+    latency: float = 0.0
+    stages: dict = field(default_factory=dict)
+
+    @property
+    def work(self) -> float:
+        """Seconds of work the update took (extraction, solve, write)."""
+        return self.extract + self.solve + self.write
+
+
 class Preview:
     """One running preview of ``scene`` (see the module docstring). ``tick()`` is the timer's work;
-    ``solves`` counts finished solves, ``cancelled`` the solves a newer change stopped."""
+    ``solves`` counts finished solves, ``cancelled`` the solves a newer change stopped;
+    ``updates`` the last RATE_OVER changes followed into the viewport (``Update``), of which
+    ``frame_rate`` is the rate."""
 
     def __init__(self, scene):
         self.scene_name = scene.name
@@ -73,7 +98,7 @@ class Preview:
         self._busy = False          # the worker is solving
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
-        self._result = None         # (extraction, values) of the newest finished solve
+        self._result = None         # (extraction, values, Update) of the newest finished solve
         self._shown = None          # the result last written (for undo)
         self._active: dict = {}     # mesh name -> its active color attribute before the preview
         self._created: set = set()  # meshes whose preview attribute this preview made
@@ -81,6 +106,7 @@ class Preview:
         self.error: Optional[str] = None
         self.solves = 0
         self.cancelled = 0
+        self.updates: list[Update] = []
         self._worker = threading.Thread(target=self._work, name="radiosity_baker preview", daemon=True)
         self._worker.start()
 
@@ -114,7 +140,25 @@ class Preview:
             self._write(*result)
         return INTERVAL
 
+    @property
+    def frame_rate(self) -> float:
+        """Updates per second a continuous change is followed at: 1 / the mean work of the last
+        RATE_OVER updates (0 before the first)."""
+        if not self.updates:
+            return 0.0
+        return len(self.updates) / sum(u.work for u in self.updates)
+
+    def status(self) -> str:
+        """One line for the panel: solves, frame rate and where the last update's time went."""
+        text = f"{self.solves} solves ({self.settings.method})"
+        if self.updates:
+            u = self.updates[-1]
+            text += (f", {self.frame_rate:.1f} fps: extract {u.extract:.2f} s, solve {u.solve:.2f} s, "
+                     f"write {u.write:.2f} s")
+        return text
+
     def _submit(self, scene) -> None:
+        start = time.perf_counter()
         try:
             extraction = extract.extract_scene(bpy.context.evaluated_depsgraph_get())
         except extract.ExtractionError as exc:
@@ -124,13 +168,15 @@ class Preview:
         if signature == self._solved:
             return  # our own attribute write, or nothing the lighting reads
         self._solved = signature
+        update = Update(extract=time.perf_counter() - start, solve=0.0, latency=start)
         with self._lock:
             if self._busy:
                 self._cancel.set()  # a newer change: stop the solve that is running
-            self._pending = extraction
+            self._pending = (extraction, update)
             self._wake.notify()
 
-    def _write(self, extraction, values) -> None:
+    def _write(self, extraction, values, update: Optional[Update] = None) -> None:
+        start = time.perf_counter()
         try:
             writes = write.prepare_color_attributes(extraction, values, self.attribute, self.settings)
         except BakeError as exc:  # a name taken, a mesh vanished or changed: the next solve follows
@@ -147,6 +193,10 @@ class Preview:
                 w.mesh.color_attributes.active_color_name = self.attribute
         self._shown = (extraction, values)
         self.error = None
+        if update is not None:  # a new solve, not undo's rewrite
+            now = time.perf_counter()
+            update.write, update.latency = now - start, now - update.latency
+            self.updates = (self.updates + [update])[-RATE_OVER:]
         for window in bpy.context.window_manager.windows:
             for area in window.screen.areas:
                 if area.type == "VIEW_3D":
@@ -180,11 +230,14 @@ class Preview:
                     self._wake.wait()
                 if self._stop:
                     return
-                extraction, self._pending = self._pending, None
+                (extraction, update), self._pending = self._pending, None
                 self._cancel.clear()
                 self._busy = True
             try:
-                values = self._sequence.bake(extraction.scene).output
+                start = time.perf_counter()
+                baked = self._sequence.bake(extraction.scene)
+                update.solve, update.stages = time.perf_counter() - start, dict(baked.timings)
+                values = baked.output
             except BakeCancelled:
                 self.cancelled += 1
                 continue
@@ -196,7 +249,7 @@ class Preview:
                     self._busy = False
             self.solves += 1
             with self._lock:
-                self._result = (extraction, values)
+                self._result = (extraction, values, update)
 
     def idle(self) -> bool:
         """Whether nothing waits for or runs in the worker."""

@@ -110,7 +110,7 @@ class RENDER_PT_radiosity_bake_live(_SubPanel, bpy.types.Panel):
         layout.label(text=f"Shows '{live.preview_attribute(s)}' (Solid › Attribute colour)")
         running = live.session()
         if running is not None:
-            layout.label(text=f"{running.solves} solves ({running.settings.method})")
+            layout.label(text=running.status())
             if running.error:
                 layout.label(text=running.error, icon='ERROR')
 

@@ -56,6 +56,30 @@ def test_moving_an_object_updates_the_preview(preview):
     assert session.solves == 2 and ground().max() > 5.0 * max(shadowed.max(), 1e-3)
 
 
+def test_the_preview_reports_its_frame_rate_and_where_each_update_went(preview):
+    scene, session, _ = preview
+    assert len(session.updates) == 1  # the first solve
+    for step in range(3):
+        bpy.data.objects[OCCLUDER].location.y += 0.2
+        bpy.context.view_layer.update()
+        started = time.perf_counter()
+        settle(session)
+        waited = time.perf_counter() - started
+        u = session.updates[-1]
+        assert len(session.updates) == 2 + step
+        assert u.extract > 0 and u.solve > 0 and u.write > 0
+        assert u.work <= u.latency <= waited + u.extract  # latency runs from the extraction's start
+        assert 0 < sum(u.stages.values()) <= u.solve  # the bake's own stages, within its time
+        assert "direct" in u.stages  # the stages a profile needs
+    assert session.frame_rate == pytest.approx(len(session.updates) / sum(u.work for u in session.updates))
+    line = session.status()
+    assert f"{session.frame_rate:.1f} fps" in line and "solve" in line and "4 solves" in line
+    undo_before = list(session.updates)
+    session.undone()
+    settle(session)
+    assert session.updates == undo_before  # writing the last result again is no new update
+
+
 def test_a_lamp_power_change_scales_the_preview_and_own_writes_cause_no_solve(preview):
     scene, session, _ = preview
     lit = ground(xy=(-2.0, 0.0))
