@@ -251,6 +251,19 @@ class Preview:
             with self._lock:
                 self._result = (extraction, values, update)
 
+    def settle(self, timeout: float = 30.0) -> None:
+        """Tick (``tick``) until the worker is idle and its result written, for callers without
+        the timer (the bpy module runs no timers: tests and benchmarks). Raises TimeoutError
+        after ``timeout`` seconds."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.tick()
+            if self.idle() and self._result is None:
+                self.tick()
+                return
+            time.sleep(0.002)
+        raise TimeoutError("the preview did not settle")
+
     def idle(self) -> bool:
         """Whether nothing waits for or runs in the worker."""
         with self._lock:

@@ -19,7 +19,6 @@ import argparse
 import platform
 import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -32,30 +31,18 @@ from radiosity_baker.addon import live  # noqa: E402
 import results_file  # noqa: E402
 
 
-def settle(session, timeout: float = 600.0) -> None:
-    """Tick the preview until its worker is idle and its result written."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        session.tick()
-        if session.idle() and session._result is None:
-            session.tick()
-            return
-        time.sleep(0.002)
-    raise RuntimeError("the preview did not settle")
-
-
 def run(size: int, method: str, frames: int) -> dict:
     scene, _ = animation_bench.room(size)
     scene.radiosity_baker.method = method
     scene.frame_set(1)
     scene.radiosity_baker_live.enabled = True  # the panel's toggle
     session = live.session()
-    settle(session)
+    session.settle(600.0)
     updates = []
     for frame in np.linspace(2, 48, frames).round().astype(int):
         scene.frame_set(int(frame))
         bpy.context.view_layer.update()
-        settle(session)
+        session.settle(600.0)
         updates.append(session.updates[-1])
     elements = session._sequence.problem.elements.count
     scene.radiosity_baker_live.enabled = False

@@ -1,7 +1,7 @@
 """The live preview: a depsgraph handler notes changes, the timer extracts and hands them to a worker,
 results land in '<attribute> Preview' on the main thread; stale solves are cancelled; switching off
 leaves the file as it was; undo and file loads are survived. Timers do not fire in the bpy module,
-so the tests drive ``tick()`` themselves."""
+so the tests tick it themselves (``Preview.settle``)."""
 import threading
 import time
 
@@ -16,18 +16,6 @@ from scenes import GROUND, OCCLUDER, SHADOW, lit_ground, user_data, value_at
 ATTRIBUTE = "Lighting Preview"
 
 
-def settle(session, timeout=30.0):
-    """Tick until the worker is idle and its result written."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        session.tick()
-        if session.idle() and session._result is None:
-            session.tick()
-            return
-        time.sleep(0.01)
-    raise AssertionError("the preview did not settle")
-
-
 @pytest.fixture
 def preview(empty_scene):
     lit_ground(empty_scene)
@@ -37,7 +25,7 @@ def preview(empty_scene):
     empty_scene.radiosity_baker_live.enabled = True  # the panel's toggle
     session = live.session()
     assert session is not None
-    settle(session)
+    session.settle()
     yield empty_scene, session, before
     live.stop()
 
@@ -52,7 +40,7 @@ def test_moving_an_object_updates_the_preview(preview):
     assert session.solves == 1 and shadowed.max() < 1.0  # the occluder's shadow
     bpy.data.objects[OCCLUDER].location.y += 3.0  # out of the way
     bpy.context.view_layer.update()  # the depsgraph handler notes it
-    settle(session)
+    session.settle()
     assert session.solves == 2 and ground().max() > 5.0 * max(shadowed.max(), 1e-3)
 
 
@@ -63,7 +51,7 @@ def test_the_preview_reports_its_frame_rate_and_where_each_update_went(preview):
         bpy.data.objects[OCCLUDER].location.y += 0.2
         bpy.context.view_layer.update()
         started = time.perf_counter()
-        settle(session)
+        session.settle()
         waited = time.perf_counter() - started
         u = session.updates[-1]
         assert len(session.updates) == 2 + step
@@ -76,7 +64,7 @@ def test_the_preview_reports_its_frame_rate_and_where_each_update_went(preview):
     assert f"{session.frame_rate:.1f} fps" in line and "solve" in line and "4 solves" in line
     undo_before = list(session.updates)
     session.undone()
-    settle(session)
+    session.settle()
     assert session.updates == undo_before  # writing the last result again is no new update
 
 
@@ -85,11 +73,11 @@ def test_a_lamp_power_change_scales_the_preview_and_own_writes_cause_no_solve(pr
     lit = ground(xy=(-2.0, 0.0))
     bpy.data.lights["Lamp"].energy *= 2.0
     bpy.context.view_layer.update()
-    settle(session)
+    session.settle()
     np.testing.assert_allclose(ground(xy=(-2.0, 0.0)), 2.0 * lit, rtol=1e-4)
     solves = session.solves
     bpy.context.view_layer.update()  # the attribute the preview wrote is no change to solve
-    settle(session)
+    session.settle()
     assert session.solves == solves
 
 
@@ -112,7 +100,7 @@ def test_a_newer_change_cancels_the_solve_still_running(preview):
     session._sequence.bake = real
     bpy.data.objects[OCCLUDER].location.x += 0.5
     bpy.context.view_layer.update()
-    settle(session)
+    session.settle()
     assert session.cancelled == 1 and session.solves == 2
 
 
@@ -137,7 +125,7 @@ def test_undo_writes_the_last_result_again(preview):
     me = bpy.data.objects[GROUND].data
     me.color_attributes.remove(me.color_attributes[ATTRIBUTE])  # as an undo of the write would
     live._on_undo()
-    settle(session)
+    session.settle()
     assert ATTRIBUTE in me.attributes
 
 
