@@ -67,6 +67,9 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 
 # Table memory (bytes) above which the bake warns (and says what fewer bins would take).
 TABLE_WARN = 2 << 30
+# Iterations whose changes may grow without damping (``relaxation``), and the smallest step.
+GROWTH_FROM = 3
+MIN_RELAX = 0.125
 
 
 @wp.func
@@ -145,7 +148,7 @@ def _transport_kernel(offset: int, linked: wp.array(dtype=wp.int32), t: Nodes, r
 @wp.kernel
 def _through_kernel(offset: int, t: Nodes, row: wp.array(dtype=wp.int32), size: int,
                     incoming: wp.array(dtype=wp.vec3), coverage: wp.array(dtype=wp.float32),
-                    table: wp.array(dtype=wp.vec3)):
+                    relax: float, table: wp.array(dtype=wp.vec3)):
     """J at leaf bin i: −(the radiance arriving from the opposite direction, at either face),
     from the incoming tables of the nodes with links on the leaf's root path. The senders'
     cones, round where the nodes are not, overlap each other in places: where the net coverage
@@ -163,7 +166,29 @@ def _through_kernel(offset: int, t: Nodes, row: wp.array(dtype=wp.int32), size: 
             acc += incoming[b]
             covered += coverage[b]
         x = path_up(t, x, WHOLE)
-    table[i] = -acc / wp.max(covered, 1.0)
+    table[i] = table[i] + (-acc / wp.max(covered, 1.0) - table[i]) * relax
+
+
+@wp.kernel
+def _relax_kernel(offset: int, current: wp.array(dtype=wp.vec3), relax: float, out: wp.array(dtype=wp.vec3)):
+    """out ← current + relax × (out − current): a damped step of the indirect light."""
+    e = wp.tid() + offset
+    out[e] = current[e] + (out[e] - current[e]) * relax
+
+
+def relaxation(changes: list, relax: float, since: int) -> tuple[float, int]:
+    """(the step for the next iteration, the iteration from which growth counts): ``relax``
+    halved (to at least MIN_RELAX) when the relative changes so far (``changes``) grew twice in a
+    row after ``since``, else kept. The first iterations' changes are large by design (unoccluded
+    light, then its cancellation); sustained growth is the iteration's oscillating mode — the
+    antiradiance of nearly parallel surfaces close together over-cancelling, each iteration the
+    opposite sign and larger (× 1.2 in the furnished room of ``bench/rooms.py``, 15 cm between a
+    wall and the sofa's back) — which a damped step (same fixed point) turns into a converging
+    one."""
+    k = len(changes)
+    if k >= max(since, GROWTH_FROM) + 3 and changes[-1] > changes[-2] > changes[-3] and relax > MIN_RELAX:
+        return relax * 0.5, k
+    return relax, since
 
 
 def table_bytes(nodes: int, bins: int) -> int:
@@ -232,8 +257,12 @@ def solve(problem) -> Solution:
     coverage = wp.empty(rowed * bins, dtype=wp.float32, device=d)
     first_leaf = links_mod.sampling(tree).first_leaf
     bin_omega = directions.solid_angle(bins)
+    changes = []
+    step = {"relax": 1.0, "since": 0}
 
     def sweep(direct, current, out, k):
+        step["relax"], step["since"] = relaxation(changes, step["relax"], step["since"])
+        relax = step["relax"]
         base.exitance(problem, direct, current, exitance)
         directions.hide(problem, links, exitance)
         device_mod.launch(_pull_kernel, (rowed - n) * bins, [linked, n, tree.nodes, row, first_leaf, size, exitance,
@@ -241,9 +270,11 @@ def solve(problem) -> Solution:
         device_mod.launch(_transport_kernel, rowed, [linked, tree.nodes, row, links.set, masks, size, bin_omega,
                                                  exitance, table, sent, incoming, coverage], dev)
         path_gather(problem, links, paths, sent, out)
-        device_mod.launch(_through_kernel, n * bins, [tree.nodes, row, size, incoming, coverage, table], dev)
+        if relax < 1.0:
+            device_mod.launch(_relax_kernel, n, [current, relax, out], dev)
+        device_mod.launch(_through_kernel, n * bins, [tree.nodes, row, size, incoming, coverage, relax, table],
+                          dev)
 
-    changes = []
     t0 = time.perf_counter()
     signed, iterations, _, _ = iterate(problem, sweep, settings.bounces, changes)
     seconds = (time.perf_counter() - t0) / max(iterations, 1)
@@ -251,7 +282,7 @@ def solve(problem) -> Solution:
     return Solution(np.maximum(signed, 0.0), {
         "iterations": iterations, "links": links.count, "link_threshold": links.threshold,
         "directional_bins": bins, "table_bytes": memory, "table_nodes": rowed, "changes": changes, "seconds_per_iteration": seconds,
-        "negative_elements": int((signed < 0).any(axis=1).sum())}, cache={"signed": signed, "table": table})
+        "negative_elements": int((signed < 0).any(axis=1).sum()), "relaxation": step["relax"]}, cache={"signed": signed, "table": table})
 
 
 def evaluate(problem, solution: Solution, receivers) -> np.ndarray:

@@ -178,3 +178,27 @@ def test_lightmap_texels_come_from_the_solution_through_evaluate(tmp_path, metho
     g, i = gather.rgb[..., 0], interp.rgb[..., 0]
     ratio = np.where(covered & (i > 0), g / np.where(i > 0, i, 1), np.nan)
     assert abs(np.nanmedian(ratio) - 1) < 0.15
+
+
+def test_antiradiance_converges_on_the_furnished_room():
+    """The furnished room of ``bench/rooms.py`` (3 k elements): the wall 15 cm behind the sofa's
+    back over-cancelled, each iteration the opposite sign and 1.2× larger, until the bake stopped
+    with ``method antiradiance diverged at bounce 45``. The step is now halved when the changes
+    grow twice in a row (``antiradiance.relaxation``; the fixed point is the same): converged
+    in 30 iterations at 64 bins, 8.4 % relative RMSE against the reference (bias +0.3 %). A room
+    that converges by itself keeps the full step."""
+    import rooms
+
+    scene = rooms.room(3000)
+    ours = bake(scene, Settings(method="antiradiance", device="cpu", directional_bins="64"))
+    changes = ours.counts["changes"]
+    print(f"\n{ours.counts['iterations']} iterations, step {ours.counts['relaxation']}, last change "
+          f"{changes[-1]:.2g}")
+    assert ours.counts["relaxation"] < 1.0 and changes[-1] <= Settings().tolerance
+    assert ours.counts["iterations"] < Settings().bounces
+    ref = bake(scene, Settings(method="reference", device="cpu"))
+    figures = metrics.summary(ours.lighting, ref.lighting)
+    print(figures)
+    assert figures["relative_rmse"] <= 0.10 and abs(figures["mean_bias"]) <= 0.02
+    assert bake(shapes.cornell_box(), Settings(method="antiradiance", device="cpu",
+                                               directional_bins="64")).counts["relaxation"] == 1.0
