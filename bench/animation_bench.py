@@ -8,7 +8,8 @@ problem moved while the topology stays, the last solution the starting point), e
 (bpy, main thread) and solve timed apart; the re-solve rate is 1 / the median solve time, what
 the live preview and a frame-range bake wait for per frame. For the smallest size, the first frame
 is also baked by Cycles (DIFFUSE Direct + Indirect vertex bake) at ``--cycles-samples`` and at
-``--truth-samples`` as the truth; each of our methods is placed on Cycles' error/time curve as in
+``--truth-samples`` as the truth, and the last (warm) frame at ``--truth-samples`` for its own
+error; each of our methods is placed on Cycles' error/time curve as in
 ``bench/accuracy.py``. Writes bench/results/animation-<machine>.json.
 
     .venv/bin/python bench/animation_bench.py [--sizes 20000 100000] [--frames 6]
@@ -65,7 +66,7 @@ def frames(scene, names, settings, count):
     """Bake ``count`` frames spread over the animation; per-frame timings and the first frame's
     per-vertex output by mesh."""
     seq = Sequence(settings)
-    rows, first = [], None
+    rows, first, last = [], None, None
     for k, frame in enumerate(np.linspace(1, 48, count).round().astype(int)):
         t0 = time.perf_counter()
         scene.frame_set(int(frame))
@@ -73,12 +74,17 @@ def frames(scene, names, settings, count):
         t1 = time.perf_counter()
         result = seq.bake(extraction.scene)
         t2 = time.perf_counter()
-        if first is None:
-            first = {t.object_name: _per_vertex(t, result.output) for t in extraction.targets}
+        last = {t.object_name: _per_vertex(t, result.output) for t in extraction.targets}
+        first = last if first is None else first
         rows.append({"frame": int(frame), "extract_seconds": round(t1 - t0, 4), "solve_seconds": round(t2 - t1, 4),
                      "moved": "move" in result.timings, "iterations": result.counts.get("iterations"),
-                     "elements": result.counts["elements"]})
-    return rows, first
+                     "elements": result.counts["elements"],
+                     "gather_rays_kept": result.counts.get("gather_rays_kept"),
+                     "gather_rays": result.counts.get("gather_rays"),
+                     # inclusive: "solve" holds "gather rays", "links" …; "lit backs" holds "direct"
+                     "stages": {k: round(v, 4) for k, v in sorted(result.timings.items(), key=lambda kv: -kv[1])
+                                if v >= 0.005}})
+    return rows, first, last, int(frame)
 
 
 def main(argv=None) -> int:
@@ -96,11 +102,11 @@ def main(argv=None) -> int:
     for size in args.sizes:
         scene, names = room(size)
         entry = {"asked_elements": size, "methods": {}}
-        firsts = {}
+        firsts, lasts = {}, {}
         for method in args.methods:
             settings = Settings(method=method, device=args.device, content="ao" if method == "ao" else "lighting")
             frames(scene, names, settings, 2)  # kernels compiled, caches warm
-            rows, firsts[method] = frames(scene, names, settings, args.frames)
+            rows, firsts[method], lasts[method], last_frame = frames(scene, names, settings, args.frames)
             moved = [r["solve_seconds"] for r in rows[1:] if r["moved"]] or [r["solve_seconds"] for r in rows]
             median = statistics.median(moved)
             entry["elements"] = rows[0]["elements"]
@@ -124,9 +130,14 @@ def main(argv=None) -> int:
                 print("cycles", s, curve[-1], flush=True)
             entry["cycles"] = {"truth_samples": args.truth_samples, "truth_seconds": round(truth_seconds, 2),
                                "curve": curve}
+            # the last frame, warm (moved from the frame before it): its own Cycles truth
+            scene.frame_set(last_frame)
+            truth_last = cycles_bake_vertex_colors(lit, samples=args.truth_samples, seed=7)
             for method, first in firsts.items():
                 if method == "ao":
                     continue  # the AO bake is another quantity
+                entry["methods"][method]["last_frame_vs_cycles"] = metrics.summary(stack(lasts[method]),
+                                                                                    stack(truth_last))
                 errors = metrics.summary(stack(first), stack(truth))
                 seconds, extrapolated = equal_error_seconds([c["relative_rmse"] for c in curve],
                                                             [c["seconds"] for c in curve],

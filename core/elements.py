@@ -151,10 +151,41 @@ def fan_outline(triangles: np.ndarray, corners: np.ndarray, order: np.ndarray) -
     return np.stack([after, then, flags], axis=1).astype(np.int32)
 
 
-def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:
+@dataclass
+class Fans:
+    """What ``build`` takes from the topology alone, the same for every frame of a deforming mesh
+    (``Problem.move`` keeps it): border: bool[n] the elements on an edge of one triangle; order:
+    int64[3T] the triangle corners 3·t + c sorted by element; fan_offsets, fan_triangles,
+    fan_outline: as in ``Elements``."""
+
+    border: np.ndarray
+    order: np.ndarray
+    fan_offsets: np.ndarray
+    fan_triangles: np.ndarray
+    fan_outline: np.ndarray
+
+
+def fans(scene: SceneData, shading: ShadingVertices) -> Fans:
+    """The ``Fans`` of ``shading``'s elements over ``scene``'s triangles."""
+    n, tris = shading.count, shading.corner
+    corners = tris.reshape(-1)
+    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    uniq, uses = np.unique(edges, axis=0, return_counts=True)
+    border = np.zeros(n, bool)
+    border[uniq[uses == 1].ravel()] = True
+    order = np.argsort(corners, kind="stable")
+    fan_offsets = np.zeros(n + 1, np.int32)
+    np.cumsum(np.bincount(corners, minlength=n), out=fan_offsets[1:])
+    return Fans(border=border, order=order, fan_offsets=fan_offsets, fan_triangles=(order // 3).astype(np.int32),
+                fan_outline=fan_outline(scene.triangles, corners, order))
+
+
+def build(scene: SceneData, shading: ShadingVertices | None = None, topology: Fans | None = None) -> Elements:
     """One disk per shading vertex of ``scene`` (split here unless given); vertices in no triangle
-    with area get zero area."""
+    with area get zero area. ``topology``: ``fans(scene, shading)`` when known (an animation's
+    earlier frame)."""
     shading = shading if shading is not None else shading_vertices(scene)
+    topology = topology if topology is not None else fans(scene, shading)
     n = shading.count
     tris = shading.corner
     tri_area = scene.triangle_areas()
@@ -174,11 +205,7 @@ def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:
     # curved fan a point between the planes would see its own triangles from behind). Interior
     # vertices stay put, so closed and curved surfaces are untouched.
     p = shading.position.astype(np.float64)
-    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-    uniq, uses = np.unique(edges, axis=0, return_counts=True)
-    border = np.zeros(n, bool)
-    border[uniq[uses == 1].ravel()] = True
-    border &= area > 0
+    border = topology.border & (area > 0)
     position = p.copy()
     # the largest triangle of each vertex; of triangles equal to 10⁻⁴ the first, so that rounding
     # (a moved copy of the mesh) cannot pick another
@@ -191,10 +218,6 @@ def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:
     centre = p[tris[largest]].mean(axis=1)
     position[border] += NUDGE * (centre[border] - p[border])
 
-    order = np.argsort(corners, kind="stable")
-    fan_triangles = (order // 3).astype(np.int32)
-    fan_offsets = np.zeros(n + 1, np.int32)
-    np.cumsum(np.bincount(corners, minlength=n), out=fan_offsets[1:])
     return Elements(
         position=position.astype(np.float32),
         normal=shading.normal,
@@ -202,8 +225,8 @@ def build(scene: SceneData, shading: ShadingVertices | None = None) -> Elements:
         albedo=weighted(scene.albedo).astype(np.float32),
         emission=weighted(scene.emission).astype(np.float32),
         vertex=shading.vertex,
-        fan_offsets=fan_offsets,
-        fan_triangles=fan_triangles,
-        fan_outline=fan_outline(scene.triangles, corners, order),
+        fan_offsets=topology.fan_offsets,
+        fan_triangles=topology.fan_triangles,
+        fan_outline=topology.fan_outline,
         corner=tris,
     )

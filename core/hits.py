@@ -45,13 +45,19 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 GRID = 32
 # Bytes a ray's hit takes: its triangle (int32) and two float16 barycentric coordinates.
 BYTES_PER_RAY = 8
+# A kept hit's ray is checked against moved triangles 1 % beyond the hit (its point is rebuilt
+# from float16 barycentric weights); at most MOST_BOXES boxes of moved objects are checked per
+# ray: more moved objects trace every ray again.
+SEGMENT_MARGIN = 0.01
+MOST_BOXES = 16
 
 
 @wp.struct
 class Hits:
-    """K rays per element, element e's at rows e·K … e·K + K − 1. face: int32[n·K] the front
-    face first hit (−1: none, or a back face); bary: vec2h[n·K] its barycentric weights of the
-    triangle's corners 0 and 1 (corner 2 gets the rest); direct: vec3[n] the mean over the rays of
+    """K rays per element, element e's at rows e·K … e·K + K − 1. face: int32[n·K] the face
+    first hit (f ≥ 0 a front face, −1 none, −2 − f back face f: the sweeps take front faces, the
+    next frame of an animation all); bary: vec2h[n·K] its barycentric weights of the triangle's
+    corners 0 and 1 (corner 2 gets the rest); direct: vec3[n] the mean over the rays of
     ρ ⊙ D at the hits (irradiance/π), which the sweeps do not change; free: float32[n] the share
     of the rays whose first hit is a front face or nothing (``enclosure.open_fraction``); rays: K."""
 
@@ -82,14 +88,83 @@ def _mix(values: wp.array(dtype=wp.vec3), c: wp.vec3i, u: float, v: float) -> wp
     return values[c[0]] * u + values[c[1]] * v + values[c[2]] * (1.0 - u - v)
 
 
+@wp.struct
+class Moved:
+    """``problem.Motion`` on the device: face: int32[T] 1 where a triangle moved; element: int32[n]
+    1 where an element's rays changed; lo, hi: vec3[M] the boxes holding the moved triangles."""
+
+    face: wp.array(dtype=wp.int32)
+    element: wp.array(dtype=wp.int32)
+    lo: wp.array(dtype=wp.vec3)
+    hi: wp.array(dtype=wp.vec3)
+
+
+@wp.func
+def _crosses(lo: wp.vec3, hi: wp.vec3, o: wp.vec3, d: wp.vec3, t: float) -> int:
+    """1 where the segment o + s·d, 0 ≤ s ≤ t, meets the box [lo, hi] (slab test)."""
+    t0 = float(0.0)
+    t1 = t
+    for axis in range(3):
+        if wp.abs(d[axis]) < 1.0e-20:
+            if o[axis] < lo[axis] or o[axis] > hi[axis]:
+                t1 = -1.0
+        else:
+            a = (lo[axis] - o[axis]) / d[axis]
+            b = (hi[axis] - o[axis]) / d[axis]
+            t0 = wp.max(t0, wp.min(a, b))
+            t1 = wp.min(t1, wp.max(a, b))
+    return int(t0 <= t1)
+
+
+@wp.func
+def _still(m: Moved, s: Surfels, origin: wp.vec3, d: wp.vec3, far: float, code: int, u: float, v: float) -> int:
+    """1 where the previous frame's hit of the ray (origin, unit d) holds in this one: its face
+    (code: ``Hits.face``) did not move and no moved triangle's box crosses the ray up to it
+    (SEGMENT_MARGIN beyond it: the barycentric weights are float16)."""
+    t = far
+    kept = int(1)
+    if code != -1:
+        f = code
+        if code < -1:
+            f = -2 - code
+        if m.face[f] != 0:
+            kept = 0
+        else:
+            p = (s.points[s.tris[3 * f]] * u + s.points[s.tris[3 * f + 1]] * v
+                 + s.points[s.tris[3 * f + 2]] * (1.0 - u - v))
+            t = wp.length(p - origin) * (1.0 + SEGMENT_MARGIN)
+    b = int(0)
+    while kept == 1 and b < m.lo.shape[0]:
+        if _crosses(m.lo[b], m.hi[b], origin, d, t) == 1:
+            kept = 0
+        b += 1
+    return kept
+
+
+@wp.func
+def _reflected(s: Surfels, corner: wp.array(dtype=wp.int32), nf: Detail, table: wp.array(dtype=wp.int32),
+               direct: wp.array(dtype=wp.vec3), f: int, u: float, v: float) -> wp.vec3:
+    """ρ ⊙ D at a front hit on triangle f at barycentric weights (u, v): D the near field's
+    traced point nearest to it where the triangle's direct light varies, else its corners'."""
+    c = _corners(corner, f)
+    light = _mix(direct, c, u, v)
+    if nf.row.shape[0] > 0:
+        traced = nf.row[f]
+        if traced >= 0:
+            light = nf.light[traced, _nearest(table, u, v)]
+    return wp.cw_mul(_mix(s.albedo, c, u, v), light)
+
+
 @wp.kernel
 def _trace_kernel(offset: int, mesh: wp.uint64, s: Surfels, corner: wp.array(dtype=wp.int32), nf: Detail,
                   table: wp.array(dtype=wp.int32),
                   direct: wp.array(dtype=wp.vec3), size: wp.array(dtype=wp.float32), rays: int, far: float,
-                  seed: int, face: wp.array(dtype=wp.int32), bary: wp.array(dtype=wp.vec2h),
-                  out: wp.array(dtype=wp.vec3), free: wp.array(dtype=wp.float32)):
-    """Element e: its rays' hits, their mean ρ ⊙ D into out[e] and the share of them that met a
-    front face or nothing into free[e]."""
+                  seed: int, m: Moved, reuse: int, face: wp.array(dtype=wp.int32),
+                  bary: wp.array(dtype=wp.vec2h), out: wp.array(dtype=wp.vec3), free: wp.array(dtype=wp.float32),
+                  traced: wp.array(dtype=wp.int32)):
+    """Element e: its rays' hits (with ``reuse``, those of the previous frame that still hold are
+    kept: ``_still``), their mean ρ ⊙ D into out[e], the share of them that met a front face or
+    nothing into free[e] and the rays traced into traced[e]."""
     e = wp.tid() + offset
     n = s.nrm[e]
     tu, tv = tangent_frame(n)
@@ -97,29 +172,43 @@ def _trace_kernel(offset: int, mesh: wp.uint64, s: Surfels, corner: wp.array(dty
     state = wp.rand_init(seed, e)
     shift0 = wp.randf(state)
     shift = wp.vec2(shift0, wp.randf(state))
-    detail = nf.row.shape[0] > 0
+    again = int(1)
+    if reuse != 0:
+        again = m.element[e]
     acc = wp.vec3(0.0)
     back = int(0)
+    count = int(0)
     for k in range(rays):
         d = cosine_r2(n, tu, tv, shift, k)
-        q = wp.mesh_query_ray(mesh, origin, d, far)
         row = e * rays + k
-        if q.result and wp.dot(q.normal, d) < 0.0:
-            face[row] = q.face
-            bary[row] = wp.vec2h(wp.float16(q.u), wp.float16(q.v))
-            c = _corners(corner, q.face)
-            light = _mix(direct, c, q.u, q.v)
-            if detail:
-                traced = nf.row[q.face]
-                if traced >= 0:
-                    light = nf.light[traced, _nearest(table, q.u, q.v)]
-            acc += wp.cw_mul(_mix(s.albedo, c, q.u, q.v), light)
-        else:
-            face[row] = -1
+        fresh = again
+        code = int(-1)
+        u = float(0.0)
+        v = float(0.0)
+        if again == 0:
+            code = face[row]
+            u = float(bary[row][0])
+            v = float(bary[row][1])
+            fresh = 1 - _still(m, s, origin, d, far, code, u, v)
+        if fresh != 0:
+            count += 1
+            q = wp.mesh_query_ray(mesh, origin, d, far)
+            code = -1
             if q.result:
-                back += 1
+                u = q.u
+                v = q.v
+                code = q.face
+                if wp.dot(q.normal, d) >= 0.0:
+                    code = -2 - q.face
+            face[row] = code
+            bary[row] = wp.vec2h(wp.float16(u), wp.float16(v))
+        if code >= 0:
+            acc += _reflected(s, corner, nf, table, direct, code, u, v)
+        elif code < -1:
+            back += 1
     out[e] = acc / float(rays)
     free[e] = float(rays - back) / float(rays)
+    traced[e] = count
 
 
 @wp.kernel
@@ -160,28 +249,46 @@ def bytes_needed(elements: int, rays: int) -> int:
     return int(elements) * int(rays) * BYTES_PER_RAY
 
 
-def trace(problem, rays: int) -> Hits:
+def trace(problem, rays: int, previous: Hits | None = None) -> Hits:
     """The ``Hits`` of ``rays`` cosine-distributed rays from each element of ``problem`` (rays
-    counted in ``problem.counts``), the near field's traced direct light (``problem.near``) at
-    the hits where it varies, and the open fraction they tell (``Hits.free``)."""
+    traced counted in ``problem.counts``), the near field's traced direct light (``problem.near``)
+    at the hits where it varies, and the open fraction they tell (``Hits.free``). ``previous``: the
+    hits of the previous frame of an animation (``problem.motion`` what moved since), updated in
+    place: only the rays of moved elements, to or from moved triangles or crossing a moved
+    object's box are traced again (``counts["gather_rays_kept"]`` the others)."""
     dev, s, els = problem.device, problem.surfels, problem.elements
     d = dev.name
     n = els.count
-    h = Hits()
-    h.rays = int(rays)
-    h.face = wp.empty(n * rays, dtype=wp.int32, device=d)
-    h.bary = wp.empty(n * rays, dtype=wp.vec2h, device=d)
-    h.direct = wp.empty(n, dtype=wp.vec3, device=d)
-    h.free = wp.empty(n, dtype=wp.float32, device=d)
+    motion = problem.motion
+    reuse = (previous is not None and motion is not None and previous.rays == rays
+             and previous.face.shape[0] == n * rays and len(motion.lo) <= MOST_BOXES)
+    if reuse:
+        h = previous
+    else:
+        h = Hits()
+        h.rays = int(rays)
+        h.face = wp.empty(n * rays, dtype=wp.int32, device=d)
+        h.bary = wp.empty(n * rays, dtype=wp.vec2h, device=d)
+        h.direct = wp.empty(n, dtype=wp.vec3, device=d)
+        h.free = wp.empty(n, dtype=wp.float32, device=d)
+    m = Moved()
+    m.face = wp.array(motion.faces.astype(np.int32) if reuse else np.zeros(0, np.int32), dtype=wp.int32, device=d)
+    m.element = wp.array(motion.elements.astype(np.int32) if reuse else np.zeros(0, np.int32), dtype=wp.int32,
+                         device=d)
+    m.lo = wp.array(motion.lo if reuse else np.zeros((0, 3), np.float32), dtype=wp.vec3, device=d)
+    m.hi = wp.array(motion.hi if reuse else np.zeros((0, 3), np.float32), dtype=wp.vec3, device=d)
     corner = wp.array(np.ascontiguousarray(els.corner.reshape(-1), np.int32), dtype=wp.int32, device=d)
     sizes = wp.array(problem.element_sizes.astype(np.float32), dtype=wp.float32, device=d)
     direct = wp.array(problem.direct, dtype=wp.vec3, device=d)
     nf = problem.near
     table = wp.array(nearest_table(nf.bary.numpy()), dtype=wp.int32, device=d)
+    traced = wp.empty(n, dtype=wp.int32, device=d)
     device_mod.launch(_trace_kernel, n, [problem.mesh.id, s, corner, nf, table, direct, sizes, h.rays,
-                                         float(problem.far), int(problem.settings.seed) + 104729, h.face,
-                                         h.bary, h.direct, h.free], dev)
-    problem.counts["rays"] += n * rays
+                                         float(problem.far), int(problem.settings.seed) + 104729, m, int(reuse),
+                                         h.face, h.bary, h.direct, h.free, traced], dev, uneven=reuse)
+    count = int(traced.numpy().sum(dtype=np.int64))
+    problem.counts["rays"] += count
+    problem.counts["gather_rays_kept"] = n * rays - count
     return h
 
 

@@ -10,7 +10,7 @@ first time they are asked for and kept (links per oracle, until the scene moves)
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -71,7 +71,8 @@ class Problem:
         scene, self._solving = self._refined(source, self.shading)
         if self.refinement.starts[-1]:
             self.mesh = st.run("bvh", _mesh, scene, d)
-        self.elements = els = st.run("elements", elements_mod.build, scene, self._solving)
+        self._fans = st.run("elements", elements_mod.fans, scene, self._solving)
+        self.elements = els = st.run("elements", elements_mod.build, scene, self._solving, self._fans)
         extent = float(np.linalg.norm(scene.positions.max(axis=0) - scene.positions.min(axis=0))) or 1.0
         self.far = extent * 1e3 + 1e3
         self.scene = scene = _escaping(scene, self.mesh, self.far, d, st)
@@ -79,8 +80,10 @@ class Problem:
         self.lights = st.run("bvh", direct_mod.Lights, scene, self.device)
         self.surfels = surfels_mod.upload(els, self.mesh, d)
         # The solution of the previous frame of an animation (``pipeline.Sequence``), which
-        # iterating solvers start from; None for a first or single frame.
+        # iterating solvers start from, and what moved since that frame; None for a first or
+        # single frame.
         self.previous = None
+        self.motion: Motion | None = None
         self._links = {}
         self.counts = {"objects": len(scene.object_names), "triangles": source.num_triangles,
                        "vertices": source.num_vertices, "shading_vertices": self.shading.count,
@@ -134,7 +137,9 @@ class Problem:
         if not np.array_equal(solving.corner, self._solving.corner):
             raise BakeError("the scene's shading vertices changed: build a new problem")
         self._solving = solving
-        self.elements = els = elements_mod.build(scene, solving)
+        before_scene, before_elements = self.scene, self.elements
+        self.elements = els = elements_mod.build(scene, solving, self._fans)  # the same topology
+        self.motion = motion(before_scene, scene, before_elements, els)
         self.mesh.points.assign(scene.positions)
         self.mesh.refit()
         self.scene = scene = _escaping(scene, self.mesh, self.far, self.device.name, self.stages)
@@ -214,6 +219,47 @@ class Problem:
             self._links[oracle] = made
         return self._links[oracle]
 
+
+
+@dataclass
+class Motion:
+    """What moved between two frames of one problem (``Problem.move``). faces: bool[T] the
+    triangles with a corner that moved; elements: bool[n] the elements whose position, normal or
+    area changed (their rays are other rays); lo, hi: float32[M,3] per object with moved triangles
+    the box that holds them now (m, the problem's frame)."""
+
+    faces: np.ndarray
+    elements: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+# What counts as not moved: a few float32 steps of the coordinates (an object's static vertices
+# round differently when the scene's frame is re-centred as others move).
+STILL = 2.0 ** -20
+
+
+def _apart(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """bool[k]: the points of a and b (float32[k,3], m) further apart than STILL × their size."""
+    scale = np.maximum(np.abs(a).max(axis=1), np.abs(b).max(axis=1)) + 1e-6
+    return np.abs(a - b).max(axis=1) > STILL * scale
+
+
+def motion(before: SceneData, scene: SceneData, before_elements, elements) -> Motion:
+    """The ``Motion`` from ``before`` to ``scene`` (the same triangles, as the solver sees them)
+    and from ``before_elements`` to ``elements`` (``elements.Elements``)."""
+    moved = _apart(before.positions, scene.positions)
+    faces = moved[scene.triangles].any(axis=1)
+    changed = (_apart(before_elements.position, elements.position)
+               | (np.abs(before_elements.normal - elements.normal).max(axis=1) > STILL)
+               | (np.abs(before_elements.area - elements.area) > STILL * 4 * elements.area))
+    objects, which = np.unique(scene.tri_object[faces], return_inverse=True)
+    corners = scene.positions[scene.triangles[faces]]  # [k,3,3]
+    lo = np.full((len(objects), 3), np.inf, np.float32)
+    hi = np.full((len(objects), 3), -np.inf, np.float32)
+    np.minimum.at(lo, which, corners.min(axis=1))
+    np.maximum.at(hi, which, corners.max(axis=1))
+    return Motion(faces, changed, lo, hi)
 
 def _reflecting(scene: SceneData, stages: Stages) -> SceneData:
     """``scene`` without light it cannot bake (``SceneData.emitting``) and with its albedo clamped

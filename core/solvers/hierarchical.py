@@ -313,7 +313,8 @@ def solve(problem) -> Solution:
     if rays:
         # traced before the links: its rays tell the open fraction the links weigh their samples
         # by, which ``enclosure`` would otherwise trace rays of its own for
-        hits = problem.stages.run("gather rays", hits_mod.trace, problem, rays)
+        previous = problem.previous.cache.get("hits") if problem.previous is not None else None
+        hits = problem.stages.run("gather rays", hits_mod.trace, problem, rays, previous)
         problem.open_fraction = hits.free
     links = links_of(problem)
     step = Iteration(problem, links)
@@ -333,7 +334,8 @@ def solve(problem) -> Solution:
         values, sweeps, _, _ = iterate(problem, lambda d, i, o, k: sweep(i, o), max(1, bounces - iterations),
                                        start=start)
         return Solution(values, {"iterations": iterations, "gather_sweeps": sweeps, "links": links.count,
-                                 "link_threshold": links.threshold, "gather_rays": rays})
+                                 "link_threshold": links.threshold, "gather_rays": rays},
+                        cache={"hits": hits})  # the next frame of an animation keeps what still holds
     # the last bounce is made at the elements themselves
     _, iterations, dev_direct, current = iterate(problem, lambda d, i, o, k: step(d, i, o),
                                                problem.settings.bounces - 1)

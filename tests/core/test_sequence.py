@@ -24,7 +24,7 @@ def frame(k: int):
                         shapes.lamp(LAMP_POINT, (0.3 + 0.05 * k, 0.0, 1.6), size=(0.05, 0.0), power=(150.0,) * 3))
 
 
-@pytest.mark.parametrize("method", ["reference", "bunnell", "ao"])
+@pytest.mark.parametrize("method", ["reference", "hierarchical", "bunnell", "ao"])
 def test_each_frame_bakes_what_a_fresh_bake_of_it_gives(method):
     settings = Settings(method=method, device="cpu", light_samples=4)
     seq = Sequence(settings)
