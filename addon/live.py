@@ -119,6 +119,12 @@ class Preview:
                 self._dirty = True
                 return
 
+    def frame_changed(self) -> None:
+        """The scene's frame changed (the timeline played or scrubbed): animated objects, lamps and
+        materials may have moved without a depsgraph update of their own (``frame_set``); the
+        extraction's signature tells whether they did."""
+        self._dirty = True
+
     def undone(self) -> None:
         self._rewrite = self._dirty = True
 
@@ -311,6 +317,12 @@ def _on_depsgraph(scene, depsgraph):
 
 
 @bpy.app.handlers.persistent
+def _on_frame(scene, *_):
+    if _session is not None and scene.name == _session.scene_name:
+        _session.frame_changed()
+
+
+@bpy.app.handlers.persistent
 def _on_undo(*_):
     if _session is not None:
         _session.undone()
@@ -330,6 +342,7 @@ def _on_load_post(*_):
 
 
 _HANDLERS = ((bpy.app.handlers.depsgraph_update_post, _on_depsgraph),
+             (bpy.app.handlers.frame_change_post, _on_frame),
              (bpy.app.handlers.undo_post, _on_undo), (bpy.app.handlers.redo_post, _on_undo))
 LOAD_HANDLERS = ((bpy.app.handlers.load_pre, _on_load_pre),
                  (bpy.app.handlers.load_post, _on_load_post))

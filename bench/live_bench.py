@@ -4,14 +4,14 @@ module.
 Scene: ``bench/animation_bench.py``'s animated room (a column bent by an armature, a door
 swinging, a lamp sliding) at about ``--sizes`` elements. For each size and preview method the
 panel's toggle starts the preview; then ``--frames`` frames of the animation are set one after
-another, each followed into the viewport as a user's edit is (the depsgraph handler notes it, the
-timer — driven here, timers do not fire in the bpy module — extracts, the worker solves, the
-timer writes the preview attribute). Per update: extraction, solve (and the bake's own stages),
+another, each followed into the viewport as the playing timeline is (the frame handler notes it,
+the timer — driven here, timers do not fire in the bpy module — extracts, the worker solves, the
+timer writes the preview attribute; a frame that gives no new update is an error). Per update: extraction, solve (and the bake's own stages),
 write and latency (``addon.live.Update``); the frame rate is that of warm updates (the first,
 which compiles and builds what later frames move, left out): 1 / their mean work. Writes
 bench/results/live-<machine>.json and prints a markdown table.
 
-    .venv/bin/python bench/live_bench.py [--sizes 6000 26000] [--frames 8] [--methods bunnell direct]
+    .venv/bin/python bench/live_bench.py [--sizes 6000 26000] [--frames 8] [--methods hierarchical bunnell direct]
 """
 from __future__ import annotations
 
@@ -40,9 +40,11 @@ def run(size: int, method: str, frames: int) -> dict:
     session.settle(600.0)
     updates = []
     for frame in np.linspace(2, 48, frames).round().astype(int):
-        scene.frame_set(int(frame))
-        bpy.context.view_layer.update()
+        before = session.solves
+        scene.frame_set(int(frame))  # the preview's frame handler notes it, as when the timeline plays
         session.settle(600.0)
+        if session.solves != before + 1:
+            raise RuntimeError(f"frame {frame} gave {session.solves - before} solves, not 1")
         updates.append(session.updates[-1])
     elements = session._sequence.problem.elements.count
     scene.radiosity_baker_live.enabled = False
@@ -69,7 +71,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", nargs="+", type=int, default=[6000, 26000])
     parser.add_argument("--frames", type=int, default=8)
-    parser.add_argument("--methods", nargs="+", default=["bunnell", "direct"])
+    parser.add_argument("--methods", nargs="+", default=["hierarchical", "bunnell", "direct"])
     args = parser.parse_args()
     if hasattr(radiosity_baker, "register"):
         radiosity_baker.register()

@@ -45,7 +45,7 @@ SOLVERS = {info.name: info for info in (
     SolverInfo("hierarchical", "Direct light plus multi-bounce indirect light over links between "
                "element clusters with ray-cast visibility (accurate, large scenes)",
                reads=("visibility_rays", "bounces", "tolerance", "link_threshold", "link_memory",
-                      "texel_indirect", "texel_links")),
+                      "texel_indirect", "texel_links"), live=True),
     SolverInfo("implicit", "Direct light plus multi-bounce indirect light over unoccluded links "
                "where, per receiver and direction bin, only the nearest layer of senders counts (implicit "
                "visibility: no rays, approximate)",

@@ -44,6 +44,28 @@ def test_moving_an_object_updates_the_preview(preview):
     assert session.solves == 2 and ground().max() > 5.0 * max(shadowed.max(), 1e-3)
 
 
+def test_playing_the_timeline_updates_the_preview_where_something_is_animated(preview):
+    """An occluder keyed out of the way at frame 10: ``frame_set`` alone (what playback and
+    scrubbing do; no depsgraph update names the object) re-solves and lifts the shadow; a frame
+    where nothing moved solves nothing."""
+    scene, session, _ = preview
+    shadowed = ground()
+    occluder = bpy.data.objects[OCCLUDER]
+    occluder.keyframe_insert("location", frame=1)
+    occluder.location.y += 3.0
+    occluder.keyframe_insert("location", frame=10)
+    scene.frame_set(1)
+    bpy.context.view_layer.update()
+    session.settle()
+    solves = session.solves
+    scene.frame_set(10)
+    session.settle()
+    assert session.solves == solves + 1 and ground().max() > 5.0 * max(shadowed.max(), 1e-3)
+    scene.frame_set(12)  # past the last key: the same scene
+    session.settle()
+    assert session.solves == solves + 1
+
+
 def test_the_preview_reports_its_frame_rate_and_where_each_update_went(preview):
     scene, session, _ = preview
     assert len(session.updates) == 1  # the first solve
