@@ -72,14 +72,14 @@ def shading_vertices(scene: SceneData) -> ShadingVertices:
                            corner=corner.reshape(t, 3).astype(np.int32))
 
 
-def _edge_keys(tris: np.ndarray) -> np.ndarray:
-    """int64[3T]: each triangle edge (its edges 01, 12, 20 in turn) as one number, lower vertex ×
-    stride + higher (stride: the largest vertex + 1), the same for both triangles that share it
-    (a 1-D key: ``np.unique`` over rows of two is ~10× slower)."""
+def _edge_keys(tris: np.ndarray) -> tuple[np.ndarray, int]:
+    """(int64[3T]: each triangle edge (its edges 01, 12, 20 in turn) as one number, lower vertex ×
+    stride + higher, the same for both triangles that share it; stride: the largest vertex + 1).
+    A 1-D key: ``np.unique`` over rows of two is ~10× slower."""
     a = np.concatenate([tris[:, 0], tris[:, 1], tris[:, 2]]).astype(np.int64)
     b = np.concatenate([tris[:, 1], tris[:, 2], tris[:, 0]]).astype(np.int64)
     stride = int(tris.max()) + 1 if tris.size else 1
-    return np.minimum(a, b) * stride + np.maximum(a, b)
+    return np.minimum(a, b) * stride + np.maximum(a, b), stride
 
 
 def open_objects(scene: SceneData) -> np.ndarray:
@@ -87,7 +87,7 @@ def open_objects(scene: SceneData) -> np.ndarray:
     borders one triangle with area only: a surface without thickness (a leaf card, a banner, a
     floor plane), whose back can be seen and lit."""
     tris = scene.triangles[scene.triangle_areas() > 0]
-    _, inverse, uses = np.unique(_edge_keys(tris), return_inverse=True, return_counts=True)
+    _, inverse, uses = np.unique(_edge_keys(tris)[0], return_inverse=True, return_counts=True)
     open_triangle = (uses[inverse.reshape(-1)] == 1).reshape(3, -1).any(axis=0)
     out = np.zeros(len(scene.object_names), bool)
     out[scene.tri_object[scene.triangle_areas() > 0][open_triangle]] = True
@@ -163,12 +163,10 @@ def fan_outline(triangles: np.ndarray, corners: np.ndarray, order: np.ndarray) -
 @dataclass
 class Fans:
     """What ``build`` takes from the topology alone, the same for every frame of a deforming mesh
-    (``Problem.move`` keeps it): border: bool[n] the elements on an edge of one triangle; order:
-    int64[3T] the triangle corners 3·t + c sorted by element; fan_offsets, fan_triangles,
-    fan_outline: as in ``Elements``."""
+    (``Problem.move`` keeps it): border: bool[n] the elements on an edge of one triangle;
+    fan_offsets, fan_triangles, fan_outline: as in ``Elements``."""
 
     border: np.ndarray
-    order: np.ndarray
     fan_offsets: np.ndarray
     fan_triangles: np.ndarray
     fan_outline: np.ndarray
@@ -178,16 +176,16 @@ def fans(scene: SceneData, shading: ShadingVertices) -> Fans:
     """The ``Fans`` of ``shading``'s elements over ``scene``'s triangles."""
     n, tris = shading.count, shading.corner
     corners = tris.reshape(-1)
-    keys, uses = np.unique(_edge_keys(tris), return_counts=True)
+    keys, stride = _edge_keys(tris)
+    keys, uses = np.unique(keys, return_counts=True)
     once = keys[uses == 1]
-    stride = int(tris.max()) + 1 if tris.size else 1  # as _edge_keys
     border = np.zeros(n, bool)
     border[once // stride] = True
     border[once % stride] = True
     order = np.argsort(corners, kind="stable")
     fan_offsets = np.zeros(n + 1, np.int32)
     np.cumsum(np.bincount(corners, minlength=n), out=fan_offsets[1:])
-    return Fans(border=border, order=order, fan_offsets=fan_offsets, fan_triangles=(order // 3).astype(np.int32),
+    return Fans(border=border, fan_offsets=fan_offsets, fan_triangles=(order // 3).astype(np.int32),
                 fan_outline=fan_outline(scene.triangles, corners, order))
 
 

@@ -254,16 +254,16 @@ def trace(problem, rays: int, previous: Hits | None = None) -> Hits:
     traced counted in ``problem.counts``), the near field's traced direct light (``problem.near``)
     at the hits where it varies, and the open fraction they tell (``Hits.free``). ``previous``: the
     hits of the previous frame of an animation (``problem.motion`` what moved since), updated in
-    place: only the rays of moved elements, to or from moved triangles or crossing a moved
+    place (traced afresh where more than MOST_BOXES objects moved): only the rays of moved elements, to or from moved triangles or crossing a moved
     object's box are traced again (``counts["gather_rays_kept"]`` the others)."""
     dev, s, els = problem.device, problem.surfels, problem.elements
     d = dev.name
     n = els.count
     motion = problem.motion
-    reuse = (previous is not None and motion is not None and previous.rays == rays
-             and previous.face.shape[0] == n * rays and len(motion.lo) <= MOST_BOXES)
-    if reuse:
-        h = previous
+    fits = previous is not None and previous.rays == rays and previous.face.shape[0] == n * rays
+    reuse = fits and motion is not None and len(motion.lo) <= MOST_BOXES
+    if fits:
+        h = previous  # its memory, even where every ray is traced again
     else:
         h = Hits()
         h.rays = int(rays)
