@@ -58,15 +58,16 @@ CONTRAST = {"smooth": (0.0, 0.1), "gradual": (0.1, 0.3), "edge": (0.3, 1.0), "di
 WORST = 0.01  # the worst fraction of texels whose share of the error is reported
 
 
-def _error(ours: np.ndarray, pair: tuple, mask: np.ndarray, mean: float) -> dict:
+def _error(ours: np.ndarray, pair: tuple, mask: np.ndarray, mean: float, own_noise=None) -> dict:
     """Relative RMSE of ``ours`` (float32[H,W,3]) against the mean of a pair of noisy truths over
-    ``mask``, Cycles' noise taken out, normalised by ``mean``; the squared error per texel."""
+    ``mask``, Cycles' noise taken out, normalised by ``mean``; the squared error per texel.
+    own_noise: float[H,W] the noise variance of ``ours`` itself where it is a Cycles bake too."""
     a, b = pair
     truth = 0.5 * (a + b)
     sigma2 = 0.5 * ((a - b) ** 2).sum(axis=2)  # per texel: one bake's noise variance, estimated
     # the pair's mean has noise σ²/2: taken out per texel, unclamped, so that sums over classes are
     # unbiased (each class's total is clamped at 0 instead, in _rmse)
-    squared = ((ours - truth) ** 2).sum(axis=2) - 0.5 * sigma2
+    squared = ((ours - truth) ** 2).sum(axis=2) - 0.5 * sigma2 - (0.0 if own_noise is None else own_noise)
     n = int(mask.sum())
     return {"texels": n, "relative_rmse": _rmse(squared[mask], mean) if n else None,
             "cycles_noise": round(float(np.sqrt(sigma2[mask].mean()) / mean), 5) if n else None}, squared
@@ -77,25 +78,26 @@ def _rmse(squared: np.ndarray, mean: float) -> float:
     return round(float(np.sqrt(max(float(squared.mean()), 0.0)) / mean), 5)
 
 
+def _around(a: np.ndarray, fill) -> np.ndarray:
+    """[9,H,W]: each texel's 3×3 neighbourhood of ``a`` [H,W] (``fill`` beyond the page)."""
+    h, w = a.shape
+    pad = np.pad(a, 1, constant_values=fill)
+    return np.stack([pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)])
+
+
 def _contrast(truth: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """float[H,W]: spread (max − min) of the truth's brightest channel over the 3×3 texels around
     each (those in ``mask``), relative to the texel's own."""
-    lum = np.where(mask, truth.max(axis=2), np.nan)
-    h, w = lum.shape
-    pad = np.pad(lum, 1, constant_values=np.nan)
-    around = np.stack([pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)])
+    lum = truth.max(axis=2)
+    around = _around(np.where(mask, lum, np.nan), np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
-        spread = (np.nanmax(np.where(np.isnan(around), -np.inf, around), axis=0)
-                  - np.nanmin(np.where(np.isnan(around), np.inf, around), axis=0))
+        spread = np.nanmax(around, axis=0) - np.nanmin(around, axis=0)  # all-NaN only outside mask
         return np.where(mask, spread / np.maximum(lum, 1e-9), 0.0)
 
 
 def _border(covered: np.ndarray) -> np.ndarray:
     """bool[H,W]: covered texels next to (8-neighbourhood) a texel no chart covers."""
-    h, w = covered.shape
-    pad = np.pad(covered, 1)
-    inside = np.all([pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
-    return covered & ~inside
+    return covered & ~_around(covered, False).all(axis=0)
 
 
 def _objects(names, size: tuple) -> np.ndarray:
@@ -176,7 +178,7 @@ def _picture(path: Path, truth: np.ndarray, ours: np.ndarray, squared: np.ndarra
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 5.4))
     top = np.percentile(truth.max(axis=2)[mask], 99)
-    for ax, image, label in ((axes[0], truth, "Cycles (point truth)"), (axes[1], ours, "ours, defaults")):
+    for ax, image, label in ((axes[0], truth, "Cycles (point truth)"), (axes[1], ours, "ours, defaults (charts only)")):
         ax.imshow(np.clip(image / top, 0, 1) ** (1 / 2.2), origin="lower", interpolation="nearest")
         ax.set_title(label)
     error = np.where(mask, np.sqrt(np.maximum(squared, 0.0)) / mean, np.nan)
@@ -227,13 +229,15 @@ def run_scene(name: str, size: int, samples: int, output: Path, pictures: Path) 
     by_object = {n: owner == k for k, n in enumerate(names)}
     out = {"objects": names, "page": [w, h], "texels_compared": int(mask.sum()),
            "cycles_samples": samples, "ours_seconds": {k: round(v, 3) for k, v in seconds.items()}, "point_truth": {}}
-    squared_default = None
     for label in ("defaults", "supersample 2"):
         figures, squared = _error(pages[label].rgb, truth, mask, mean)
         out["point_truth"][label] = {**figures, "classes": _classes(squared, mask, classes, mean),
                                      "objects": _classes(squared, mask, by_object, mean),
                                      "worst": _worst(squared, mask, mean)}
-        squared_default = squared if label == "defaults" else squared_default
+        if label == "defaults":
+            _picture(pictures.with_name(f"{pictures.name}-{name}.png"), 0.5 * (truth[0] + truth[1]),
+                     pages[label].rgb * pages[label].covered[..., None], squared, mask, mean,
+                     f"{name}: lightmap {w}×{h} against Cycles' image bake ({samples} spp pair), texel by texel")
     for part, passes in (("direct", ("DIRECT",)), ("indirect", ("INDIRECT",))):
         pair = tuple(p[..., :3] for p in cycles(passes, 1, samples))
         figures, squared = _error(pages[part].rgb, pair, mask, mean)
@@ -243,17 +247,15 @@ def run_scene(name: str, size: int, samples: int, output: Path, pictures: Path) 
     fine = cycles(("DIRECT", "INDIRECT"), 2, max(1, samples // 4))
     (fa, whole_a), (fb, whole_b) = _footprint(fine[0]), _footprint(fine[1])
     full = mask & whole_a & whole_b
-    out["footprint_truth"] = {"texels": int(full.sum()),
-                              "point_truth_against_it": _error(0.5 * (truth[0] + truth[1]), (fa, fb), full, mean)[0]}
+    point_noise = 0.25 * ((truth[0] - truth[1]) ** 2).sum(axis=2)  # σ²/2 of the point pair's mean
+    out["footprint_truth"] = {"texels": int(full.sum()), "point_truth_against_it": _error(
+        0.5 * (truth[0] + truth[1]), (fa, fb), full, mean, point_noise)[0]}
     for label in ("defaults", "supersample 2"):
         figures, squared = _error(pages[label].rgb, (fa, fb), full, mean)
         out["footprint_truth"][label] = {**figures, "worst": _worst(squared, full, mean),
                                          "point_truth_same_texels": _error(pages[label].rgb, truth, full, mean)[0]}
     out["vertex_bake"] = _vertex_error(names, samples)
-    _picture(pictures.with_name(f"{pictures.name}-{name}.png"), 0.5 * (truth[0] + truth[1]), pages["defaults"].rgb,
-             squared_default, mask, mean,
-             f"{name}: lightmap {w}×{h} against Cycles' image bake ({samples} spp pair), texel by texel")
-    print(json.dumps({k: out[k] for k in ("point_truth",)}["point_truth"]["defaults"]["worst"]), flush=True)
+    print(f"  defaults: {json.dumps(out['point_truth']['defaults']['worst'])}", flush=True)
     return out
 
 
@@ -275,6 +277,8 @@ def markdown(results: dict) -> str:
             lines.append(f"| {label} | footprint truth ({fp['texels']} texels) | {e['relative_rmse']:.2%} "
                          f"(point truth there {e['point_truth_same_texels']['relative_rmse']:.2%}) | "
                          f"{e['worst']['share_of_squared_error']:.0%} | {e['worst']['relative_rmse_without_them']:.2%} |")
+        lines.append(f"| Cycles' point bake (the pair's mean) | footprint truth | "
+                     f"{fp['point_truth_against_it']['relative_rmse']:.2%} | | |")
         lines += ["", "| class (defaults, point truth) | texels | rel. RMSE | share of the squared error |",
                   "| --- | --- | --- | --- |"]
         for label, c in {**pt["defaults"]["classes"], **pt["defaults"]["objects"]}.items():

@@ -254,8 +254,9 @@ def trace(problem, rays: int, previous: Hits | None = None) -> Hits:
     traced counted in ``problem.counts``), the near field's traced direct light (``problem.near``)
     at the hits where it varies, and the open fraction they tell (``Hits.free``). ``previous``: the
     hits of the previous frame of an animation (``problem.motion`` what moved since), updated in
-    place (traced afresh where more than MOST_BOXES objects moved): only the rays of moved elements, to or from moved triangles or crossing a moved
-    object's box are traced again (``counts["gather_rays_kept"]`` the others)."""
+    place: only the rays of moved elements, to or from moved triangles or crossing a moved object's
+    box are traced again (``counts["gather_rays_kept"]`` the others); all of them where more than
+    MOST_BOXES objects moved."""
     dev, s, els = problem.device, problem.surfels, problem.elements
     d = dev.name
     n = els.count
