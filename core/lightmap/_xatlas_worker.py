@@ -4,9 +4,12 @@ xatlas holds the GIL for its whole run and can crash on bad input, so it never r
 process. This script imports nothing of the package (nor bpy): only numpy and xatlas.
 
 ``charts``: IN holds ``meshes`` (count) and per mesh ``m{m}_pos`` float32[N,3] (metres),
-``m{m}_idx`` uint32[M,3], ``m{m}_density`` (texels per metre), and ``padding``, ``max_size``
-(texels). Each mesh is cut into charts and laid out alone, at most at the density whose charts'
-area fills a page (a far too high one makes xatlas build enormous charts first); OUT holds per mesh
+``m{m}_idx`` uint32[M,3], ``m{m}_density`` (texels per metre), optionally ``m{m}_corners``
+int64[M,3] (the face corner of each triangle corner: triangles sharing one are of one polygon), and
+``padding``, ``max_size`` (texels). Each mesh is cut into charts and laid out alone, at most at the
+density whose charts' area fills a page (a far too high one makes xatlas build enormous charts
+first); a polygon xatlas cut by a seam is put whole into one chart (see ``_whole_polygons``); OUT
+holds per mesh
 ``m{m}_uv`` float32[K,2] (texels), ``m{m}_idx`` uint32[M,3] (the triangles over those UV
 vertices, in the input's order), ``m{m}_chart`` int32[K] (the chart of each UV vertex) and
 ``m{m}_density`` (the density laid out at).
@@ -74,13 +77,144 @@ def charts(data) -> dict:
         atlas = xatlas.Atlas()
         atlas.add_mesh(pos * np.float32(scale), idx)
         atlas.generate(xatlas.ChartOptions(), _pack_options(0, density / scale, padding))
-        _, tri, uv = atlas[0]
+        vert, tri, uv = atlas[0]
         _, chart = atlas.get_mesh_vertex_assignment(0)
-        out[f"m{m}_uv"] = (uv * np.array([atlas.width, atlas.height], np.float64)).astype(np.float32)
-        out[f"m{m}_idx"] = tri
+        uv = uv * np.array([atlas.width, atlas.height], np.float64)
+        tri, chart = tri.astype(np.int64), chart.astype(np.int64)
+        if f"m{m}_corners" in data.files:
+            uv, tri, chart = _whole_polygons(pos.astype(np.float64), uv, tri, vert.astype(np.int64), chart,
+                                             np.asarray(data[f"m{m}_corners"], np.int64))
+        out[f"m{m}_uv"] = uv.astype(np.float32)
+        out[f"m{m}_idx"] = tri.astype(np.uint32)
         out[f"m{m}_chart"] = chart.astype(np.int32)
         out[f"m{m}_density"] = np.array(density)
     return out
+
+
+def _polygons(corners: np.ndarray) -> np.ndarray:
+    """int64[M]: a label per triangle, the same for the triangles of one polygon (int64[M,3] face
+    corners: a polygon's triangles are joined by the corners they share)."""
+    _, corner = np.unique(corners.ravel(), return_inverse=True)
+    corner = corner.reshape(-1, 3)
+    label = np.arange(corner.shape[0])
+    while True:  # the smallest label spreads through shared corners until nothing changes
+        least = np.full(int(corner.max()) + 1, corner.shape[0])
+        np.minimum.at(least, corner.ravel(), np.repeat(label, 3))
+        new = least[corner].min(axis=1)
+        if np.array_equal(new, label):
+            return label
+        label = new
+
+
+def _unfold(pos: np.ndarray, uv: np.ndarray, edge: np.ndarray, apex: np.ndarray, opposite: np.ndarray):
+    """float64[P,2] UVs (texels) of the ``apex`` mesh vertices (int64[P]) of triangles hinged on
+    the UV edges ``edge`` (int64[P,2,2]: mesh vertex and UV vertex of each end), laid flat on the
+    side of the edge away from the UV vertex ``opposite`` (int64[P]: the hinge triangle's third),
+    at the edge's own texels per metre: each triangle keeps its shape (pos float64[N,3] metres)."""
+    a, b, p = pos[edge[:, 0, 0]], pos[edge[:, 1, 0]], pos[apex]
+    e = b - a
+    length = np.maximum(np.linalg.norm(e, axis=1), 1e-30)
+    along = np.einsum("ij,ij->i", p - a, e) / length
+    across = np.linalg.norm(np.cross(p - a, e), axis=1) / length
+    ua, ub, q = uv[edge[:, 0, 1]], uv[edge[:, 1, 1]], uv[opposite]
+    d = ub - ua
+    texels = np.maximum(np.linalg.norm(d, axis=1), 1e-30)
+    unit = d / texels[:, None]
+    normal = np.stack([-unit[:, 1], unit[:, 0]], axis=1)
+    side = np.sign(_side(uv, edge, q))
+    normal *= np.where(side == 0, 1.0, -side)[:, None]
+    k = (texels / length)[:, None]
+    return ua + k * (along[:, None] * unit + across[:, None] * normal)
+
+
+def _side(uv: np.ndarray, edge: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """float64[P]: positive on the left of each UV edge (``edge`` as in ``_unfold``), negative on
+    its right, of ``point`` float64[P,2] (texels)."""
+    a, b = uv[edge[:, 0, 1]], uv[edge[:, 1, 1]]
+    d, q = b - a, point - a
+    return d[:, 0] * q[:, 1] - d[:, 1] * q[:, 0]
+
+
+def _whole_polygons(pos, uv, tri, vert, chart, corners):
+    """Charts that keep each polygon whole: a face corner holds one UV, so a polygon that xatlas
+    cut by a chart seam would otherwise be drawn from two charts at once, a sliver across the page
+    over other charts. Each triangle of a cut polygon that is not in the chart of the polygon's
+    largest triangle is moved into it, unfolded across the edge it shares with a triangle already
+    there; its far corner takes that chart's UV vertex of the same mesh vertex where there is one.
+
+    pos float64[N,3] mesh vertices (m); uv float64[K,2] UV vertices (texels); tri int64[M,3] UV
+    vertex of each triangle corner; vert int64[K] mesh vertex and chart int64[K] chart of each UV
+    vertex; corners int64[M,3] face corner of each triangle corner. Returns (uv, tri, chart) as
+    given, UV vertices no triangle uses left out.
+    """
+    poly = _polygons(corners)
+    own = chart[tri[:, 0]]
+    area = _areas(pos, vert[tri])
+    order = np.lexsort((-area, poly))  # per polygon its largest triangle first
+    first = order[np.r_[True, poly[order][1:] != poly[order][:-1]]]
+    target = np.empty(int(poly.max()) + 1, np.int64)
+    target[poly[first]] = own[first]
+    want = target[poly]
+    pending = own != want
+    if not pending.any():
+        return uv, tri, chart
+    tri = tri.copy()
+    span = int(corners.max()) + 1
+    # the triangle corners to each side of a triangle's three edges (corner k to corner k + 1)
+    ends = np.array([[0, 1], [1, 2], [2, 0]])
+    third = np.array([2, 0, 1])
+    while pending.any():
+        done = np.flatnonzero(~pending & np.isin(poly, poly[pending]))  # settled, in cut polygons
+        c = corners[done][:, ends]  # [S,3,2]
+        keys = np.minimum(c[..., 0], c[..., 1]) * span + np.maximum(c[..., 0], c[..., 1])
+        sort = np.argsort(keys.ravel(), kind="stable")
+        sorted_keys = keys.ravel()[sort]
+        todo = np.flatnonzero(pending)
+        c = corners[todo][:, ends]  # [P,3,2]
+        mine = np.minimum(c[..., 0], c[..., 1]) * span + np.maximum(c[..., 0], c[..., 1])
+        at = np.minimum(np.searchsorted(sorted_keys, mine), sorted_keys.size - 1)
+        found = sorted_keys[at] == mine
+        go = found.any(axis=1)
+        if not go.any():
+            break  # no polygon corner shared with a settled triangle: left as xatlas cut it
+        todo, found, at = todo[go], found[go], at[go]
+        k = np.argmax(found, axis=1)  # the first edge that hinges on a settled triangle
+        row = np.arange(todo.size)
+        flat = sort[at[row, k]]
+        hinge, hinge_edge = done[flat // 3], flat % 3
+        # the hinge triangle's UV vertices at the two shared corners, matched to this triangle's
+        hc = corners[hinge][:, ends][row, hinge_edge]  # [P,2] corners of the hinge's edge
+        hu = tri[hinge][:, ends][row, hinge_edge]  # [P,2] its UV vertices
+        mc = corners[todo][:, ends][row, k]  # [P,2] the same corners, in this triangle's order
+        swap = hc[:, 0] != mc[:, 0]
+        hu = np.where(swap[:, None], hu[:, ::-1], hu)
+        apex = vert[tri[todo, third[k]]]
+        edge = np.stack([np.stack([vert[hu[:, 0]], hu[:, 0]], 1), np.stack([vert[hu[:, 1]], hu[:, 1]], 1)], 1)
+        opposite = tri[hinge, third[hinge_edge]]
+        goal = want[todo]
+        # the far corner: the chart's UV vertex of that mesh vertex, else one new per (chart, vertex)
+        lookup = chart * pos.shape[0] + vert
+        ls = np.argsort(lookup, kind="stable")
+        key = goal * pos.shape[0] + apex
+        j = np.minimum(np.searchsorted(lookup[ls], key), lookup.size - 1)
+        flat_uv = _unfold(pos, uv, edge, apex, opposite)
+        # reused only where it keeps the triangle unflipped: across the hinge from its third corner
+        there = (lookup[ls][j] == key) & (_side(uv, edge, uv[ls[j]]) * _side(uv, edge, uv[opposite]) < 0)
+        far = np.where(there, ls[j], -1)
+        fresh = np.flatnonzero(~there)
+        if fresh.size:
+            new_keys, pick, inverse = np.unique(key[fresh], return_index=True, return_inverse=True)
+            made = flat_uv[fresh[pick]]
+            far[fresh] = uv.shape[0] + inverse
+            uv = np.concatenate([uv, made])
+            vert = np.concatenate([vert, apex[fresh[pick]]])
+            chart = np.concatenate([chart, goal[fresh[pick]]])
+        tri[todo, k] = hu[:, 0]
+        tri[todo, (k + 1) % 3] = hu[:, 1]
+        tri[todo, third[k]] = far
+        pending[todo] = False
+    used, tri = np.unique(tri, return_inverse=True)
+    return uv[used], tri.reshape(-1, 3), chart[used]
 
 
 def _footprint(uv: np.ndarray, chart: np.ndarray, padding: int):

@@ -255,7 +255,8 @@ def lay_out(request: LightmapRequest, problem) -> Layout:
     if fresh:
         layouts = stages.run("unwrap", unwrap.unwrap,
                              [[unwrap.ChartMesh(o.object_name, _mesh_vertices(o, scene),
-                                                o.corner_vert[o.corner_triangles], _asked(o, settings))
+                                                o.corner_vert[o.corner_triangles], _asked(o, settings),
+                                                o.corner_triangles)
                                for o in g.owners] for g in fresh],
                              settings.max_size, settings.padding, settings.atlas_pages == "many",
                              request.python, request.cache_dir, check=stages.check)

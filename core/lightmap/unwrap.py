@@ -28,7 +28,7 @@ from . import cache
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
-_CACHE_VERSION = b"rb-unwrap-6"
+_CACHE_VERSION = b"rb-unwrap-7"
 
 
 @dataclass
@@ -37,13 +37,16 @@ class ChartMesh:
 
     name: for messages. positions: float32[N,3] world-space vertex positions (m).
     triangles: int32[T,3] vertex indices. NaN / infinite and zero-area triangles are left out.
-    density: texels per metre asked for it.
+    density: texels per metre asked for it. corners: int[T,3] the face corner of each triangle
+    corner (triangles sharing one are of one polygon, which is then kept whole in one chart, as a
+    corner holds one UV), None where every triangle is a face of its own.
     """
 
     name: str
     positions: np.ndarray
     triangles: np.ndarray
     density: float
+    corners: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -115,12 +118,17 @@ def unwrap(groups: list[list[ChartMesh]], max_size: int, padding: int, many: boo
         for mesh, (keep, _, _) in zip(group, items):
             if not keep.any():
                 raise BakeError(f"{mesh.name} has no triangle with area: it cannot be lightmapped")
-    chart_keys = [[_key(pos, idx, float(mesh.density), int(padding), int(max_size))
-                   for mesh, (_, pos, idx) in zip(group, items)] for group, items in zip(groups, cleaned)]
+    corners = [[None if mesh.corners is None else np.asarray(mesh.corners, np.int64).reshape(-1, 3)[keep]
+                for mesh, (keep, _, _) in zip(group, items)] for group, items in zip(groups, cleaned)]
+    chart_keys = [[_key(pos, idx, float(mesh.density), int(padding), int(max_size), *([] if c is None else [c]))
+                   for mesh, (_, pos, idx), c in zip(group, items, cs)]
+                  for group, items, cs in zip(groups, cleaned, corners)]
     jobs = {}
-    for group, items, keys in zip(groups, cleaned, chart_keys):
-        for mesh, (_, pos, idx), key in zip(group, items, keys):
+    for group, items, keys, cs in zip(groups, cleaned, chart_keys, corners):
+        for mesh, (_, pos, idx), key, c in zip(group, items, keys, cs):
             jobs[key] = {"pos": pos, "idx": idx, "density": np.array(float(mesh.density))}
+            if c is not None:
+                jobs[key]["corners"] = c
     charts = cache.cached(cache_dir, "c", jobs, lambda todo: _run(
         "charts", todo, {"padding": np.array(int(padding)), "max_size": np.array(int(max_size))}, python,
         cache_dir, check=check))

@@ -102,6 +102,44 @@ def test_one_page_lowers_the_density_until_everything_fits(tmp_path):
     assert layout.density[0] == layout.density[1] < 200.0
 
 
+def _wobbly_torus():
+    """A torus of quads bent in and out five times round (m): xatlas cuts some of its quads by a
+    seam. (positions, triangles, face corners of each triangle: a quad's two share two)."""
+    pos, nrm, tris = shapes.torus(around=32, tube=16, inward=False)
+    pos = pos + 0.15 * nrm * np.sin(5 * np.arctan2(pos[:, 1], pos[:, 0]))[:, None]
+    q = np.arange(len(tris) // 2)[:, None] * 4
+    return pos, tris, np.concatenate([q + [0, 1, 2], q + [0, 2, 3]])
+
+
+def _cut(tri_uv: np.ndarray, corners: np.ndarray) -> int:
+    """How many triangles disagree with another of their polygon on a shared corner's UV."""
+    uv = np.zeros((corners.max() + 1, 2))
+    uv[corners.ravel()] = tri_uv.reshape(-1, 2)
+    return int((np.abs(uv[corners] - tri_uv) > 1e-6).any(axis=(1, 2)).sum())
+
+
+def test_a_polygon_cut_by_a_chart_seam_is_kept_whole_in_one_chart_without_overlap(tmp_path):
+    pos, tris, corners = _wobbly_torus()
+    density, padding = 20.0, 2
+    apart, = unwrap([[ChartMesh("torus", pos, tris, density)]], 256, padding, cache_dir=tmp_path)
+    assert _cut(apart.tri_uv[0], corners) > 0  # xatlas alone cuts quads: the case is met
+    layout, = unwrap([[ChartMesh("torus", pos, tris, density, corners)]], 256, padding, cache_dir=tmp_path)
+    (w, h), = layout.sizes
+    tri_uv = layout.tri_uv[0]
+    assert _cut(tri_uv, corners) == 0  # one UV per face corner: what Blender's UV map holds
+    _overlap_free(tri_uv, w, h, padding)
+    # the moved triangles are laid flat beside their chart, not stretched across the page
+    uv = tri_uv.astype(np.float64) * (w, h)
+    p = pos.astype(np.float64)[tris]
+    stretch = (np.linalg.norm(uv - np.roll(uv, 1, axis=1), axis=2).max(axis=1)
+               / (density * np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)))
+    assert stretch.max() < 2.0
+    signed = np.cross(uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0])
+    labels = _charts(tri_uv)
+    for c in np.unique(labels):  # a chart may be mirrored as a whole, no triangle within it
+        assert len(np.unique(np.sign(signed[labels == c]))) == 1
+
+
 def test_nan_and_zero_area_triangles_are_left_out(tmp_path):
     p, _, t = shapes.grid(1.0, 4)
     p = np.concatenate([p, [[np.nan, 0, 0]]]).astype(np.float32)
