@@ -295,13 +295,13 @@ def _ms(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
 
 
 def _our_lightmap(names, size: int, output: Path, method: dict):
-    """Our lightmap of ``names`` on one page of ``size`` (the default settings, supersample 2, but
-    ``method``: Settings fields, which may override them), baked through the add-on so the ``Lightmap`` UVs Cycles bakes through are
-    written: (page, wall seconds from extraction to written files, timings)."""
+    """Our lightmap of ``names`` on one page of ``size`` (the default settings but ``method``:
+    Settings fields, which override them), baked through the add-on so the ``Lightmap`` UVs Cycles
+    bakes through are written: (page, wall seconds from extraction to written files, timings)."""
     from radiosity_baker.addon.job import BakeJob
 
     settings = Settings(**{"target": "lightmap", "max_size": size, "texel_density": 1e4, "padding": 2,
-                           "supersample": 2, "atlas_pages": "one", "reunwrap": True, "output": str(output),
+                           "atlas_pages": "one", "reunwrap": True, "output": str(output),
                            **method})
     t0 = time.perf_counter()
     job = BakeJob(settings, names)
@@ -476,9 +476,11 @@ def _lightmap_method(args) -> dict:
     first of ``--light-samples`` and ``--light-selections``, one sample per texel (the default:
     Cycles' image bake lights each texel at its centre — on the emissive room's 128 page
     supersample 2 read 2.06 % from a 4096-sample Cycles bake, 1 read 1.84 %); else the defaults
-    but the device and supersample 2 (issue 13's setting)."""
+    but the device and ``--supersample`` (2 unless told: in ``bench/lightmap_errors.py`` it is
+    closer than 1 to Cycles' point bake on the furnished room, the emissive room and the open scene,
+    as well as to the texel-footprint mean it aims at)."""
     if args.passes != "direct":
-        return {"device": args.device}
+        return {"device": args.device, "supersample": args.supersample}
     return {"method": "direct", "light_samples": args.light_samples[0], "supersample": 1,
             "light_selection": args.light_selections[0], "device": args.device}
 
@@ -503,31 +505,35 @@ def main(argv=None) -> int:
     parser.add_argument("--output", type=Path, default=ROOT / "bench" / "results")
     parser.add_argument("--lightmap", action="store_true",
                         help="compare lightmaps with Cycles' image bake instead")
-    parser.add_argument("--lightmap-scene", default="cornell_box",
-                        help=f"a sample scene or one built in code ({', '.join(SCENES)})")
+    parser.add_argument("--lightmap-scene", nargs="+", default=["cornell_box"],
+                        help=f"sample scenes or ones built in code ({', '.join(SCENES)}), one file each")
     parser.add_argument("--truth-size", type=int, default=256, help="page with a high-sample Cycles truth")
     parser.add_argument("--pair-sizes", type=int, nargs="*", default=[1024],
                         help="pages whose Cycles noise is measured from pairs of bakes")
     parser.add_argument("--pair-samples", type=int, nargs="+", default=[16, 64])
     parser.add_argument("--extrapolated-sizes", type=int, nargs="*", default=[2048])
+    parser.add_argument("--supersample", type=int, default=2,
+                        help="our lightmap's samples per texel along each axis (not with --passes direct)")
     args = parser.parse_args(argv)
     machine = platform.node() or "machine"
     stamp = datetime.date.today().isoformat()
     if args.lightmap:
         import os
         import tempfile
-        load = os.getloadavg()[0]
-        results = {"machine": machine, "date": stamp, "platform": platform.platform(), "cpu_count": os.cpu_count(),
-                   "blender": bpy.app.version_string, "load_at_start": round(load, 2),
-                   "lightmap": {"scene": args.lightmap_scene,
-                                **run_lightmap(args.lightmap_scene, args.truth_size, args.samples,
-                                               args.reference_samples, args.pair_sizes, args.pair_samples,
-                                               args.extrapolated_sizes, Path(tempfile.mkdtemp(prefix="rb-acc-")),
-                                               args.passes, _lightmap_method(args))},
-                   "load_at_end": round(os.getloadavg()[0], 2)}
         kind = "-direct" if args.passes == "direct" else ""
-        return _write(args.output / f"accuracy-lightmap{kind}-{machine}-{stamp}", results, lightmap_markdown,
-                      lightmap_plot)
+        for scene in args.lightmap_scene:
+            load = os.getloadavg()[0]
+            results = {"machine": machine, "date": stamp, "platform": platform.platform(),
+                       "cpu_count": os.cpu_count(), "blender": bpy.app.version_string, "load_at_start": round(load, 2),
+                       "lightmap": {"scene": scene,
+                                    **run_lightmap(scene, args.truth_size, args.samples, args.reference_samples,
+                                                   args.pair_sizes, args.pair_samples, args.extrapolated_sizes,
+                                                   Path(tempfile.mkdtemp(prefix="rb-acc-")), args.passes,
+                                                   _lightmap_method(args))},
+                       "load_at_end": round(os.getloadavg()[0], 2)}
+            _write(args.output / f"accuracy-lightmap{kind}-{scene}-{machine}-{stamp}", results, lightmap_markdown,
+                   lightmap_plot)
+        return 0
     results = {"machine": machine, "date": stamp, "platform": platform.platform(),
                "cpu_count": __import__("os").cpu_count(), "blender": bpy.app.version_string,
                "load_at_start": round(__import__("os").getloadavg()[0], 2),
