@@ -260,12 +260,24 @@ def _collapsed(atlas, count: int) -> bool:
 def _no_room(meshes: list, fits, max_size: int, padding: int) -> str:
     """Why ``meshes`` found no room on a page of ``max_size``: their chart count and the padding,
     and the largest smaller padding ``p`` at which ``fits(p)`` finds them room, if any."""
-    charts = sum(int(m[2].max()) + 1 if m[2].size else 0 for m in meshes)
+    charts = _chart_count(meshes)
     text = f"{charts} charts {padding} texels apart do not fit a page of {max_size} texels"
     p = next((p for p in range(padding - 1, 0, -1) if fits(p)), None)
     if p is not None:
         return text + f"; with a padding of {p} they fit (--padding {p}), or raise --max-size"
     return text + " even 1 texel apart: raise --max-size"
+
+
+def _chart_count(meshes: list) -> int:
+    """How many charts ``meshes`` (as ``pack`` holds them) have."""
+    return sum(len(np.unique(m[2])) for m in meshes)
+
+
+def _below_floor(meshes: list, max_size: int, padding: int) -> bool:
+    """Whether the charts of ``meshes`` cannot share a page of max_size however small they are
+    scaled: each keeps at least a texel and its padding all round. (Scaled on regardless, xatlas
+    drops the charts that fall below its epsilons and lays the others over where they were.)"""
+    return _chart_count(meshes) * (2 * padding + 1) ** 2 > max_size * max_size
 
 
 def _fits_alone(mesh, max_size: int, padding: int):
@@ -274,9 +286,15 @@ def _fits_alone(mesh, max_size: int, padding: int):
     area, side = _footprint(mesh[0], mesh[2], padding)
     if 2 * side <= max_size and 4 * area <= FILL * max_size * max_size:
         return 1.0  # far smaller than a page
+    if _below_floor([mesh], max_size, padding):
+        return None
     s = min(1.0, (max_size - 2 * padding - 1) / max(side, 1e-9), max_size / max(area, 1e-9) ** 0.5)
+    charts = None
     for _ in range(MAX_TRIES):
         atlas = _layout([mesh], [s], max_size, padding)
+        charts = atlas.chart_count if charts is None else charts
+        if atlas.chart_count < charts:
+            return None  # charts shrunk below xatlas' epsilons: dropped, the rest laid over them
         if atlas.atlas_count <= 1:
             return None if _collapsed(atlas, 1) else s
         s *= 0.95  # a page short: a little smaller each try
@@ -287,9 +305,15 @@ def _one_page(meshes: list, base: list, max_size: int, padding: int):
     """(atlas, scale): ``meshes``, each scaled by its ``base`` × the scale, on one page of at most
     max_size, the scale lowered from 1 until they fit; None when none is found (or charts shrink
     to nothing: the padding alone fills the page)."""
+    if _below_floor(meshes, max_size, padding):
+        return None
     s = 1.0
+    charts = None
     for _ in range(MAX_TRIES):
         atlas = _layout(meshes, [s * b for b in base], 0, padding)
+        charts = atlas.chart_count if charts is None else charts
+        if atlas.chart_count < charts:
+            return None  # charts shrunk below xatlas' epsilons: dropped, the rest laid over them
         longest = max(atlas.width, atlas.height)
         if atlas.atlas_count <= 1 and longest <= max_size:
             return None if _collapsed(atlas, len(meshes)) else (atlas, s)

@@ -28,7 +28,7 @@ from . import cache
 
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
-_CACHE_VERSION = b"rb-unwrap-7"
+_CACHE_VERSION = b"rb-unwrap-8"
 
 
 @dataclass

@@ -140,6 +140,16 @@ def test_a_polygon_cut_by_a_chart_seam_is_kept_whole_in_one_chart_without_overla
         assert len(np.unique(np.sign(signed[labels == c]))) == 1
 
 
+def test_one_page_too_small_for_the_charts_at_any_scale_is_an_error_not_charts_laid_over_each_other(tmp_path):
+    pos, tris = _box()
+    meshes = [ChartMesh(f"box{k}", pos + np.float32(2 * k), tris, 8.0) for k in range(30)]  # 180 charts
+    with pytest.raises(BakeError, match="180 charts 2 texels apart do not fit a page of 64 texels"):
+        unwrap([meshes], max_size=64, padding=2, many=False, cache_dir=tmp_path)
+    layout, = unwrap([meshes], max_size=96, padding=2, many=False, cache_dir=tmp_path)
+    (w, h), = layout.sizes
+    _overlap_free(np.concatenate(layout.tri_uv), w, h, 2)
+
+
 def test_nan_and_zero_area_triangles_are_left_out(tmp_path):
     p, _, t = shapes.grid(1.0, 4)
     p = np.concatenate([p, [[np.nan, 0, 0]]]).astype(np.float32)
