@@ -197,14 +197,13 @@ def _whole_polygons(pos, uv, tri, vert, chart, corners):
         ls = np.argsort(lookup, kind="stable")
         key = goal * pos.shape[0] + apex
         j = np.minimum(np.searchsorted(lookup[ls], key), lookup.size - 1)
-        flat_uv = _unfold(pos, uv, edge, apex, opposite)
         # reused only where it keeps the triangle unflipped: across the hinge from its third corner
         there = (lookup[ls][j] == key) & (_side(uv, edge, uv[ls[j]]) * _side(uv, edge, uv[opposite]) < 0)
         far = np.where(there, ls[j], -1)
         fresh = np.flatnonzero(~there)
         if fresh.size:
-            new_keys, pick, inverse = np.unique(key[fresh], return_index=True, return_inverse=True)
-            made = flat_uv[fresh[pick]]
+            _, pick, inverse = np.unique(key[fresh], return_index=True, return_inverse=True)
+            made = _unfold(pos, uv, edge[fresh[pick]], apex[fresh[pick]], opposite[fresh[pick]])
             far[fresh] = uv.shape[0] + inverse
             uv = np.concatenate([uv, made])
             vert = np.concatenate([vert, apex[fresh[pick]]])
