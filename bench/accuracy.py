@@ -410,7 +410,7 @@ def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes,
                                                   [c["seconds"] + (c[extra] if extra else 0.0) for c in curve],
                                                   max(ours, 1e-6))
             row[f"{label}_seconds_at_equal_error"] = round(t, 3)
-            row[f"speedup_vs_{label}"] = round(t / seconds, 2)
+            row[f"speedup_vs_{label}"] = float(f"{t / seconds:.3g}")  # 3 figures: a small ratio must not read 0
             row[f"{label}_extrapolated"] = extrapolated
         speedups = {k: v for k, v in row.items() if "speedup" in k}
         print(f"  lightmap {size}: ours RMSE {ours:.4f}; {json.dumps(speedups)}", flush=True)
