@@ -67,11 +67,13 @@ class Receivers:
     def __len__(self) -> int:
         return int(self.points.shape[0])
 
-    def reconstruct(self, per_element: np.ndarray) -> np.ndarray:
-        """float32[R,C]: Σ_k weights[:,k] · per_element[elements[:,k]] (per_element float32[n,C])."""
+    def reconstruct(self, per_element: np.ndarray, index=slice(None)) -> np.ndarray:
+        """float32[R,C]: Σ_k weights[:,k] · per_element[elements[:,k]] (per_element float32[n,C]);
+        index: of the receivers wanted (default all), their rows alone."""
         if self.aligned:
-            return np.asarray(per_element, np.float32)
-        return np.einsum("rk,rkc->rc", self.weights, per_element[self.elements]).astype(np.float32)
+            return np.asarray(per_element, np.float32)[index]
+        return np.einsum("rk,rkc->rc", self.weights[index],
+                         per_element[self.elements[index]]).astype(np.float32)
 
 
 def at_elements(problem) -> Receivers:

@@ -117,6 +117,7 @@ def reconstruct_with_detail(problem, solution: Solution, receivers) -> np.ndarra
     if receivers.aligned or problem.settings.texel_indirect != "gather" or not len(values):
         return values
     from .. import gather
+    from ..lightmap import sparse
 
     stages = problem.stages
     if "final_gather" not in solution.cache:
@@ -127,7 +128,17 @@ def reconstruct_with_detail(problem, solution: Solution, receivers) -> np.ndarra
                                  els.normal)
         solution.cache["final_gather"] = (radiance, at_elements)
     radiance, at_elements = solution.cache["final_gather"]
-    detail = stages.run("texel gather", gather.light_at, problem, radiance, receivers.points,
-                        receivers.normals, stages.reporter("texel gather"))
-    detail -= receivers.reconstruct(at_elements)
+
+    def detail_at(index, progress):
+        light = gather.light_at(problem, radiance, receivers.points[index], receivers.normals[index],
+                                progress)
+        return light - receivers.reconstruct(at_elements, index)
+
+    report, s = stages.reporter("texel gather"), problem.settings.supersample
+    if receivers.grids is not None and s > 1:  # supersampled texels: sparsely
+        detail, again = stages.run("texel gather", sparse.gather, receivers.grids, s, detail_at,
+                                   values, report)
+        problem.counts["texels_gathered_whole"] = round(again, 4)
+    else:
+        detail = stages.run("texel gather", detail_at, slice(None), report)
     return np.maximum(values + detail, 0.0).astype(np.float32)
