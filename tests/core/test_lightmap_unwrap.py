@@ -150,6 +150,49 @@ def test_one_page_too_small_for_the_charts_at_any_scale_is_an_error_not_charts_l
     _overlap_free(np.concatenate(layout.tri_uv), w, h, 2)
 
 
+def _charts(count: int) -> tuple:
+    """A worker's UV mesh of ``count`` one-triangle charts of a texel each (texels)."""
+    uv = (np.arange(3 * count)[:, None] // 3 * 2.0 + np.tile([[0, 0], [1, 0], [0, 1]], (count, 1))).astype(np.float32)
+    return uv, np.arange(3 * count, dtype=np.uint32).reshape(count, 3), np.repeat(np.arange(count), 3).astype(np.int32)
+
+
+class _Atlas:
+    """What ``_one_page`` reads of an xatlas atlas: one page of ``side`` texels holding
+    ``charts`` charts of one sound triangle."""
+
+    def __init__(self, charts: int, side: int):
+        self.chart_count, self.atlas_count, self.width, self.height = charts, 1, side, side
+
+    def __getitem__(self, k):
+        return None, np.array([[0, 1, 2]], np.uint32), np.array([[0, 0], [1, 0], [0, 1]], np.float32)
+
+
+def test_charts_that_cannot_each_keep_a_texel_and_their_padding_are_refused_before_packing(monkeypatch):
+    from radiosity_baker.core.lightmap import _xatlas_worker as worker
+
+    mesh = _charts(851)  # the level's charts on a 128 page
+    assert worker._below_floor([mesh], 128, 2) and not worker._below_floor([mesh], 128, 1)
+
+    def never(*args):
+        raise AssertionError("packed although no scale fits")
+
+    monkeypatch.setattr(worker, "_layout", never)
+    assert worker._one_page([mesh], [1.0], 128, 2) is None
+    assert worker._fits_alone(mesh, 128, 2) is None
+
+
+def test_a_layout_whose_charts_xatlas_drops_while_shrinking_them_is_refused(monkeypatch):
+    from radiosity_baker.core.lightmap import _xatlas_worker as worker
+
+    tries = iter([_Atlas(10, 300), _Atlas(6, 100)])  # too large, then fits: with 4 charts dropped
+    monkeypatch.setattr(worker, "_layout", lambda *args: next(tries))
+    assert worker._one_page([_charts(10)], [1.0], 128, 2) is None
+    tries = iter([_Atlas(10, 300), _Atlas(10, 100)])  # the same charts all kept: it fits
+    monkeypatch.setattr(worker, "_layout", lambda *args: next(tries))
+    atlas, scale = worker._one_page([_charts(10)], [1.0], 128, 2)
+    assert atlas.chart_count == 10 and scale < 1.0
+
+
 def test_nan_and_zero_area_triangles_are_left_out(tmp_path):
     p, _, t = shapes.grid(1.0, 4)
     p = np.concatenate([p, [[np.nan, 0, 0]]]).astype(np.float32)
