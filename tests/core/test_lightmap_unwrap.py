@@ -150,7 +150,7 @@ def test_one_page_too_small_for_the_charts_at_any_scale_is_an_error_not_charts_l
     _overlap_free(np.concatenate(layout.tri_uv), w, h, 2)
 
 
-def _charts(count: int) -> tuple:
+def _one_triangle_charts(count: int) -> tuple:
     """A worker's UV mesh of ``count`` one-triangle charts of a texel each (texels)."""
     uv = (np.arange(3 * count)[:, None] // 3 * 2.0 + np.tile([[0, 0], [1, 0], [0, 1]], (count, 1))).astype(np.float32)
     return uv, np.arange(3 * count, dtype=np.uint32).reshape(count, 3), np.repeat(np.arange(count), 3).astype(np.int32)
@@ -170,7 +170,7 @@ class _Atlas:
 def test_charts_that_cannot_each_keep_a_texel_and_their_padding_are_refused_before_packing(monkeypatch):
     from radiosity_baker.core.lightmap import _xatlas_worker as worker
 
-    mesh = _charts(851)  # the level's charts on a 128 page
+    mesh = _one_triangle_charts(851)  # the level's charts on a 128 page
     assert worker._below_floor([mesh], 128, 2) and not worker._below_floor([mesh], 128, 1)
 
     def never(*args):
@@ -186,10 +186,10 @@ def test_a_layout_whose_charts_xatlas_drops_while_shrinking_them_is_refused(monk
 
     tries = iter([_Atlas(10, 300), _Atlas(6, 100)])  # too large, then fits: with 4 charts dropped
     monkeypatch.setattr(worker, "_layout", lambda *args: next(tries))
-    assert worker._one_page([_charts(10)], [1.0], 128, 2) is None
+    assert worker._one_page([_one_triangle_charts(10)], [1.0], 128, 2) is None
     tries = iter([_Atlas(10, 300), _Atlas(10, 100)])  # the same charts all kept: it fits
     monkeypatch.setattr(worker, "_layout", lambda *args: next(tries))
-    atlas, scale = worker._one_page([_charts(10)], [1.0], 128, 2)
+    atlas, scale = worker._one_page([_one_triangle_charts(10)], [1.0], 128, 2)
     assert atlas.chart_count == 10 and scale < 1.0
 
 
