@@ -61,6 +61,30 @@ def _capsule(radius, height, segments):
     return verts, [*quads.tolist(), *fans]
 
 
+def _in_fixed_order(ob):
+    """Rebuild ``ob``'s mesh with its vertices sorted by position and its polygons by their
+    vertices: Blender 5.0.1's ``primitive_uv_sphere_add`` orders its polygons differently in each
+    process (measured), and xatlas' charts follow that order, so without this the Sphere's
+    lightmap layout, and a Cycles truth cached for it, change between runs."""
+    me = ob.data
+    co = np.empty(3 * len(me.vertices), np.float32)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    order = np.lexsort(np.round(co, 5).T[::-1])
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    polygons = []
+    for polygon in me.polygons:
+        corners = [int(rank[v]) for v in polygon.vertices]
+        first = corners.index(min(corners))  # the same winding, started at its lowest vertex
+        polygons.append(tuple(corners[first:] + corners[:first]))
+    fixed = bpy.data.meshes.new(me.name)
+    fixed.from_pydata(co[order].tolist(), [], sorted(polygons))
+    fixed.update()
+    ob.data = fixed
+    bpy.data.meshes.remove(me)
+
+
 def furnished_room():
     _empty()
     # one cell everywhere, as rooms.py grids them: 6 446 vertices for the boxes, 2 494 for the rest
@@ -87,6 +111,7 @@ def furnished_room():
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(-1.6, -0.6, 0.3))
     sphere = bpy.context.object
     sphere.name = "Sphere"
+    _in_fixed_order(sphere)
     sphere.data.shade_smooth()
     sphere.data.materials.append(_material("Sphere", (0.3, 0.5, 0.7)))
     _lamp("Lamp", "POINT", (0.5, -0.5, 2.6), energy=300.0, shadow_soft_size=0.05)
