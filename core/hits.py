@@ -45,11 +45,11 @@ wp.set_module_options({"enable_backward": False})  # no gradients: halves compil
 GRID = 32
 # Bytes a ray's hit takes: its triangle (int32) and two float16 barycentric coordinates.
 BYTES_PER_RAY = 8
-# A kept hit's ray is checked against moved triangles 1 % beyond the hit (its point is rebuilt
-# from float16 barycentric weights); at most MOST_BOXES boxes of moved objects are checked per
-# ray: more moved objects trace every ray again.
+# A kept hit's ray is checked against the moved triangles 1 % beyond the hit (its point is rebuilt
+# from float16 barycentric weights). Where more than MOST_MOVED of the triangles moved, that check
+# costs about what tracing does, and every ray is traced again.
 SEGMENT_MARGIN = 0.01
-MOST_BOXES = 16
+MOST_MOVED = 0.5
 
 
 @wp.struct
@@ -91,36 +91,21 @@ def _mix(values: wp.array(dtype=wp.vec3), c: wp.vec3i, u: float, v: float) -> wp
 @wp.struct
 class Moved:
     """``problem.Motion`` on the device: face: int32[T] 1 where a triangle moved; element: int32[n]
-    1 where an element's rays changed; lo, hi: vec3[M] the boxes holding the moved triangles."""
+    1 where an element's rays changed; mesh: the BVH of the moved triangles where they are now
+    (``any`` 0 where none moved)."""
 
     face: wp.array(dtype=wp.int32)
     element: wp.array(dtype=wp.int32)
-    lo: wp.array(dtype=wp.vec3)
-    hi: wp.array(dtype=wp.vec3)
-
-
-@wp.func
-def _crosses(lo: wp.vec3, hi: wp.vec3, o: wp.vec3, d: wp.vec3, t: float) -> int:
-    """1 where the segment o + s·d, 0 ≤ s ≤ t, meets the box [lo, hi] (slab test)."""
-    t0 = float(0.0)
-    t1 = t
-    for axis in range(3):
-        if wp.abs(d[axis]) < 1.0e-20:
-            if o[axis] < lo[axis] or o[axis] > hi[axis]:
-                t1 = -1.0
-        else:
-            a = (lo[axis] - o[axis]) / d[axis]
-            b = (hi[axis] - o[axis]) / d[axis]
-            t0 = wp.max(t0, wp.min(a, b))
-            t1 = wp.min(t1, wp.max(a, b))
-    return int(t0 <= t1)
+    mesh: wp.uint64
+    any: int
 
 
 @wp.func
 def _still(m: Moved, s: Surfels, origin: wp.vec3, d: wp.vec3, far: float, code: int, u: float, v: float) -> int:
     """1 where the previous frame's hit of the ray (origin, unit d) holds in this one: its face
-    (code: ``Hits.face``) did not move and no moved triangle's box crosses the ray up to it
-    (SEGMENT_MARGIN beyond it: the barycentric weights are float16)."""
+    (code: ``Hits.face``) did not move and no moved triangle, where it is now, meets the ray up
+    to it (SEGMENT_MARGIN beyond it: the barycentric weights are float16). That is exact: a moved
+    triangle in front of the old hit before would have been the hit, whose face then moved."""
     t = far
     kept = int(1)
     if code != -1:
@@ -133,11 +118,9 @@ def _still(m: Moved, s: Surfels, origin: wp.vec3, d: wp.vec3, far: float, code: 
             p = (s.points[s.tris[3 * f]] * u + s.points[s.tris[3 * f + 1]] * v
                  + s.points[s.tris[3 * f + 2]] * (1.0 - u - v))
             t = wp.length(p - origin) * (1.0 + SEGMENT_MARGIN)
-    b = int(0)
-    while kept == 1 and b < m.lo.shape[0]:
-        if _crosses(m.lo[b], m.hi[b], origin, d, t) == 1:
+    if kept == 1 and m.any != 0:
+        if wp.mesh_query_ray(m.mesh, origin, d, t).result:
             kept = 0
-        b += 1
     return kept
 
 
@@ -240,6 +223,14 @@ def nearest_table(bary: np.ndarray) -> np.ndarray:
     return d.argmin(axis=1).astype(np.int32)
 
 
+def _moved_mesh(s: Surfels, faces: np.ndarray, device: str) -> wp.Mesh:
+    """The BVH of the triangles ``faces`` (bool[T]) flags, on the points of ``s``'s BVH (shared,
+    not copied)."""
+    tris = s.tris.numpy().reshape(-1, 3)[faces]
+    return wp.Mesh(points=s.points, indices=wp.array(np.ascontiguousarray(tris.reshape(-1)), dtype=wp.int32,
+                                                      device=device))
+
+
 # Rows of hits a kernel indexes with int32.
 MOST_ROWS = 2 ** 31 - 1
 
@@ -255,14 +246,14 @@ def trace(problem, rays: int, previous: Hits | None = None) -> Hits:
     at the hits where it varies, and the open fraction they tell (``Hits.free``). ``previous``: the
     hits of the previous frame of an animation (``problem.motion`` what moved since), updated in
     place: only the rays of moved elements, to or from moved triangles or crossing a moved object's
-    box are traced again (``counts["gather_rays_kept"]`` the others); all of them where more than
-    MOST_BOXES objects moved."""
+    triangle where it is now are traced again (``counts["gather_rays_kept"]`` the others); all of
+    them where more than MOST_MOVED of the triangles moved."""
     dev, s, els = problem.device, problem.surfels, problem.elements
     d = dev.name
     n = els.count
     motion = problem.motion
     fits = previous is not None and previous.rays == rays and previous.face.shape[0] == n * rays
-    reuse = fits and motion is not None and len(motion.lo) <= MOST_BOXES
+    reuse = fits and motion is not None and motion.faces.mean() <= MOST_MOVED
     if fits:
         h = previous  # its memory, even where every ray is traced again
     else:
@@ -276,8 +267,9 @@ def trace(problem, rays: int, previous: Hits | None = None) -> Hits:
     m.face = wp.array(motion.faces.astype(np.int32) if reuse else np.zeros(0, np.int32), dtype=wp.int32, device=d)
     m.element = wp.array(motion.elements.astype(np.int32) if reuse else np.zeros(0, np.int32), dtype=wp.int32,
                          device=d)
-    m.lo = wp.array(motion.lo if reuse else np.zeros((0, 3), np.float32), dtype=wp.vec3, device=d)
-    m.hi = wp.array(motion.hi if reuse else np.zeros((0, 3), np.float32), dtype=wp.vec3, device=d)
+    moved = _moved_mesh(s, motion.faces, d) if reuse and motion.faces.any() else None
+    m.mesh = moved.id if moved is not None else 0
+    m.any = int(moved is not None)
     corner = wp.array(np.ascontiguousarray(els.corner.reshape(-1), np.int32), dtype=wp.int32, device=d)
     sizes = wp.array(problem.element_sizes.astype(np.float32), dtype=wp.float32, device=d)
     direct = wp.array(problem.direct, dtype=wp.vec3, device=d)

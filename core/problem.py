@@ -225,13 +225,10 @@ class Problem:
 class Motion:
     """What moved between two frames of one problem (``Problem.move``). faces: bool[T] the
     triangles with a corner that moved; elements: bool[n] the elements whose position, normal or
-    area changed (their rays are other rays); lo, hi: float32[M,3] per object with moved triangles
-    the box that holds them now (m, the problem's frame)."""
+    area changed (their rays are other rays)."""
 
     faces: np.ndarray
     elements: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
 
 
 # What counts as not moved: a few float32 steps of the coordinates (an object's static vertices
@@ -253,13 +250,7 @@ def motion(before: SceneData, scene: SceneData, before_elements, elements) -> Mo
     changed = (_apart(before_elements.position, elements.position)
                | (np.abs(before_elements.normal - elements.normal).max(axis=1) > STILL)
                | (np.abs(before_elements.area - elements.area) > STILL * 4 * elements.area))
-    objects, which = np.unique(scene.tri_object[faces], return_inverse=True)
-    corners = scene.positions[scene.triangles[faces]]  # [k,3,3]
-    lo = np.full((len(objects), 3), np.inf, np.float32)
-    hi = np.full((len(objects), 3), -np.inf, np.float32)
-    np.minimum.at(lo, which, corners.min(axis=1))
-    np.maximum.at(hi, which, corners.max(axis=1))
-    return Motion(faces, changed, lo, hi)
+    return Motion(faces, changed)
 
 def _reflecting(scene: SceneData, stages: Stages) -> SceneData:
     """``scene`` without light it cannot bake (``SceneData.emitting``) and with its albedo clamped

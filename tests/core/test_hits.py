@@ -146,3 +146,26 @@ def test_an_animation_frame_keeps_the_hits_that_still_hold_and_traces_the_rest_a
     assert np.mean(kept.face.numpy() != fresh.face.numpy()) <= 1e-3
     np.testing.assert_allclose(kept.free.numpy(), fresh.free.numpy(), atol=0.02)
     np.testing.assert_allclose(kept.direct.numpy(), fresh.direct.numpy(), rtol=5e-3, atol=1e-6)
+
+
+
+def test_hits_are_kept_however_many_objects_moved():
+    """Twenty balls, each its own object, rising: the kept hits are checked against the moved
+    triangles themselves, not against a box per moved object (which traced every ray again past
+    16 objects), so the rays passing between the balls are kept, and they are those a fresh trace
+    finds. Measured: 56 % kept (the balls hold 41 % of the triangles), faces identical; the
+    box check kept none."""
+    from test_sequence import frame
+
+    balls = [((x, y, 0.3), 0.06, 0) for x in np.linspace(-0.6, 0.6, 5) for y in np.linspace(-0.5, 0.5, 4)]
+    problem = Problem(frame(0, balls), Settings(method="hierarchical", device="cpu"))
+    before = hits.trace(problem, 64)
+    problem.move(frame(1, balls))
+    fresh = hits.trace(problem, 64)
+    kept = hits.trace(problem, 64, before)
+    share = problem.counts["gather_rays_kept"] / (problem.elements.count * 64)
+    print(f"\nkept {share:.1%} of the rays; {np.mean(kept.face.numpy() != fresh.face.numpy()):.3%} differ")
+    assert share >= 0.5
+    assert np.mean(kept.face.numpy() != fresh.face.numpy()) <= 1e-3
+    np.testing.assert_allclose(kept.free.numpy(), fresh.free.numpy(), atol=0.02)
+    np.testing.assert_allclose(kept.direct.numpy(), fresh.direct.numpy(), rtol=5e-3, atol=1e-6)

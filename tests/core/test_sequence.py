@@ -11,17 +11,20 @@ from radiosity_baker.core.pipeline import Sequence
 from radiosity_baker.core.scene import LAMP_POINT
 
 
-def frame(k: int):
-    """Frame k of a room corner whose ball rises 5 cm a frame under a lamp that slides along x."""
+def frame(k: int, balls=(((0.2, 0.1, 0.35), 0.3, 2),)):
+    """Frame k of a room corner whose balls ((centre at frame 0, radius, icosphere subdivisions),
+    each its own object) rise 5 cm a frame under a lamp that slides along x."""
     floor = shapes.grid(2.0, 12)
     wall = shapes.grid(2.0, 12)
     rot = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], np.float32)
     wall = (wall[0] @ rot.T + np.array([-1.0, 0.0, 1.0], np.float32), wall[1] @ rot.T, wall[2])
-    ball = shapes.icosphere(0.3, 2, inward=False)
-    ball = (ball[0] + np.array([0.2, 0.1, 0.35 + 0.05 * k], np.float32), ball[1], ball[2])
-    return shapes.scene([(*floor, (0.7,) * 3, (0,) * 3), (*wall, (0.8, 0.3, 0.2), (0,) * 3),
-                         (*ball, (0.6,) * 3, (0,) * 3)],
-                        shapes.lamp(LAMP_POINT, (0.3 + 0.05 * k, 0.0, 1.6), size=(0.05, 0.0), power=(150.0,) * 3))
+    objects = [(*floor, (0.7,) * 3, (0,) * 3), (*wall, (0.8, 0.3, 0.2), (0,) * 3)]
+    for centre, radius, subdivisions in balls:
+        ball = shapes.icosphere(radius, subdivisions, inward=False)
+        at = np.asarray(centre, np.float32) + np.array([0.0, 0.0, 0.05 * k], np.float32)
+        objects.append((ball[0] + at, ball[1], ball[2], (0.6,) * 3, (0,) * 3))
+    return shapes.scene(objects, shapes.lamp(LAMP_POINT, (0.3 + 0.05 * k, 0.0, 1.6), size=(0.05, 0.0),
+                                             power=(150.0,) * 3))
 
 
 @pytest.mark.parametrize("method", ["reference", "hierarchical", "bunnell", "ao"])
