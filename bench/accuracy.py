@@ -27,7 +27,10 @@ sample count and at a high sample count taken as the truth:
   error, mean bias, 95th-percentile absolute error (core.metrics.scalar_summary); the speedup is
   measured on the mean absolute error.
 
-With ``--lightmap`` (issue #13) it compares lightmaps instead: see :func:`run_lightmap`.
+With ``--lightmap`` (issue #13) it compares lightmaps instead: see :func:`run_lightmap`. With
+``--lightmap-cost 256 1024 4096`` (issue 40) it times our page of each ``--lightmap-scene`` alone at
+each size, no Cycles bake: seconds and microseconds per covered texel, by stage
+(:func:`run_lightmap_cost`; accuracy-lightmap-cost-<scene>-<machine>-<date>.*).
 
 Every bake is timed (wall clock, extraction included for ours, scene sync included for Cycles),
 after one untimed bake of ours that loads Warp's kernels (the add-on loads them when Blender
@@ -309,6 +312,14 @@ def _our_lightmap(names, size: int, output: Path, method: dict):
     return job.result["lightmap"].pages[0], time.perf_counter() - t0, job.timings
 
 
+def _lightmapped(scene_name) -> list:
+    """Open ``scene_name``; the names of the meshes its lightmap bakes: in the sample scenes every
+    mesh but the Cornell light, in the scenes built in code their reflectors."""
+    scene = _open(scene_name)
+    return (receivers(scene) if scene_name in SCENES
+            else sorted(o.name for o in scene.objects if o.type == "MESH" and o.name != "Light"))
+
+
 def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes, pair_samples,
                  extrapolated_sizes, output: Path, passes="all", method=None) -> dict:
     """Lightmaps of ``scene_name`` against Cycles' image bake through the same UVs: its DIFFUSE
@@ -328,10 +339,7 @@ def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes,
     """
     pyoidn = _oidn()
     method = dict(method or {})
-    scene = _open(scene_name)
-    # the sample scenes: every mesh but the Cornell light; scenes built in code: their reflectors
-    names = (receivers(scene) if scene_name in SCENES
-             else sorted(o.name for o in scene.objects if o.type == "MESH" and o.name != "Light"))
+    names = _lightmapped(scene_name)
     out = {"objects": names, "method": method.get("method", Settings().method), "settings": method,
            "passes": list(PASSES[passes]),
            "denoiser": "OIDN RTLightmap (pyoidn)" if pyoidn else None,
@@ -416,6 +424,62 @@ def run_lightmap(scene_name, truth_size, samples, reference_samples, pair_sizes,
         print(f"  lightmap {size}: ours RMSE {ours:.4f}; {json.dumps(speedups)}", flush=True)
         out["sizes"][str(size)] = row
     return out
+
+
+def run_lightmap_cost(scene_name, sizes, output: Path, method=None) -> dict:
+    """Our lightmap of ``scene_name`` (receivers as :func:`run_lightmap` takes them) on one page of
+    each of ``sizes``, after one untimed bake at the smallest that loads the kernels: per size the
+    page, the covered texels, the wall seconds from extraction to written files, microseconds per
+    covered texel and the stages' seconds."""
+    method = dict(method or {})
+    names = _lightmapped(scene_name)
+    _our_lightmap(names, min(sizes), output / "warm", method)
+    rows = []
+    for size in sizes:
+        page, seconds, timings = _our_lightmap(names, size, output / f"ours-{size}", method)
+        texels = int(page.covered.sum())
+        rows.append({"max_size": size, "size": list(page.size), "texels": texels, "seconds": round(seconds, 3),
+                     "microseconds_per_texel": round(1e6 * seconds / max(texels, 1), 2),
+                     "stages": {k: round(v, 3) for k, v in timings.items()}})
+        print(f"  lightmap cost {size}: {page.size[0]}x{page.size[1]}, {texels} texels in {seconds:.1f} s "
+              f"({rows[-1]['microseconds_per_texel']} µs a texel)", flush=True)
+    return {"objects": names, "method": method.get("method", Settings().method), "settings": method, "sizes": rows}
+
+
+def cost_markdown(results) -> str:
+    """One row per page size: texels, seconds, µs per texel and the three largest stages."""
+    lines = ["| page | covered texels | seconds | µs per texel | largest stages (s) |",
+             "| --- | ---: | ---: | ---: | --- |"]
+    for r in results["cost"]["sizes"]:
+        top = sorted(r["stages"].items(), key=lambda kv: -kv[1])[:3]
+        lines.append(f"| {r['size'][0]}×{r['size'][1]} | {r['texels']} | {r['seconds']:.1f} | "
+                     f"{r['microseconds_per_texel']:.1f} | {', '.join(f'{k} {v:.1f}' for k, v in top)} |")
+    return "\n".join(lines)
+
+
+def cost_plot(results, path: Path) -> None:
+    """Seconds and microseconds per texel against covered texels, log-log."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rows = results["cost"]["sizes"]
+    texels = [r["texels"] for r in rows]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.5))
+    left.plot(texels, [r["seconds"] for r in rows], "r-s")
+    left.set_ylabel("wall time, extraction to written files (s)")
+    right.plot(texels, [r["microseconds_per_texel"] for r in rows], "r-s")
+    right.set_ylabel("µs per covered texel")
+    for ax in (left, right):
+        for r in rows:
+            ax.annotate(f"{r['size'][0]}²", (r["texels"], r["seconds"] if ax is left else r["microseconds_per_texel"]),
+                        textcoords="offset points", xytext=(4, 4), fontsize=8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("covered texels")
+        ax.set_title(f"{results['cost']['scene']}: our lightmap by page size")
+        ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 def lightmap_markdown(results) -> str:
@@ -512,11 +576,27 @@ def main(argv=None) -> int:
                         help="pages whose Cycles noise is measured from pairs of bakes")
     parser.add_argument("--pair-samples", type=int, nargs="+", default=[16, 64])
     parser.add_argument("--extrapolated-sizes", type=int, nargs="*", default=[2048])
+    parser.add_argument("--lightmap-cost", type=int, nargs="+", metavar="SIZE",
+                        help="time our lightmap of each --lightmap-scene at these page sizes, no Cycles")
     parser.add_argument("--supersample", type=int, default=2,
                         help="our lightmap's samples per texel along each axis (not with --passes direct)")
     args = parser.parse_args(argv)
     machine = platform.node() or "machine"
     stamp = datetime.date.today().isoformat()
+    if args.lightmap_cost:
+        import os
+        import tempfile
+        for scene in args.lightmap_scene:
+            results = {"machine": machine, "date": stamp, "platform": platform.platform(),
+                       "cpu_count": os.cpu_count(), "blender": bpy.app.version_string,
+                       "load_at_start": round(os.getloadavg()[0], 2),
+                       "cost": {"scene": scene, **run_lightmap_cost(scene, args.lightmap_cost,
+                                                                    Path(tempfile.mkdtemp(prefix="rb-cost-")),
+                                                                    _lightmap_method(args))},
+                       "load_at_end": round(os.getloadavg()[0], 2)}
+            _write(args.output / f"accuracy-lightmap-cost-{scene}-{machine}-{stamp}", results, cost_markdown,
+                   cost_plot)
+        return 0
     if args.lightmap:
         import os
         import tempfile

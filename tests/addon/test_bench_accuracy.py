@@ -73,6 +73,22 @@ def test_accuracy_bench_lightmap_mode_places_our_page_on_cycles_curves(tmp_path)
     assert json_path.with_suffix(".png").stat().st_size > 10_000
 
 
+def test_accuracy_bench_cost_mode_times_our_page_per_texel_at_each_size(tmp_path):
+    """--lightmap-cost: our Cornell page at two sizes, no Cycles; a larger page covers more texels
+    and each row's µs per texel is its seconds over its texels."""
+    accuracy = script("bench/accuracy.py")
+    assert accuracy.main(["--lightmap-cost", "32", "64", "--output", str(tmp_path)]) == 0
+    (json_path,) = tmp_path.glob("accuracy-lightmap-cost-cornell_box-*.json")
+    rows = json.loads(json_path.read_text())["cost"]["sizes"]
+    assert [r["max_size"] for r in rows] == [32, 64]
+    assert 0 < rows[0]["texels"] < rows[1]["texels"] and max(rows[1]["size"]) <= 64
+    for r in rows:
+        assert r["microseconds_per_texel"] == pytest.approx(1e6 * r["seconds"] / r["texels"], rel=0.01, abs=0.01)
+        assert r["stages"] and max(r["stages"].values()) <= 1.05 * r["seconds"]  # no stage outlasts the bake
+    assert "µs per texel" in json_path.with_suffix(".md").read_text()
+    assert json_path.with_suffix(".png").stat().st_size > 10_000
+
+
 @pytest.mark.slow
 def test_accuracy_bench_direct_mode_places_each_light_sample_count_on_cycles_direct_curve(tmp_path):
     """--passes direct: Cycles' Direct pass as the truth, our direct light at each sample count and
