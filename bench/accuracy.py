@@ -59,6 +59,7 @@ from harness.cycles import cycles_bake_image, cycles_bake_vertex_colors
 from radiosity_baker.core import Settings
 from harness import metrics
 from radiosity_baker.core import settings as core_settings
+from radiosity_baker.core.errors import SettingsError
 from radiosity_baker.core.solvers import SOLVERS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -430,13 +431,22 @@ def run_lightmap_cost(scene_name, sizes, output: Path, method=None) -> dict:
     """Our lightmap of ``scene_name`` (receivers as :func:`run_lightmap` takes them) on one page of
     each of ``sizes``, after one untimed bake at the smallest that loads the kernels: per size the
     page, the covered texels, the wall seconds from extraction to written files, microseconds per
-    covered texel and the stages' seconds."""
+    covered texel and the stages' seconds; a size the bake refuses (``SettingsError``) gets its
+    message instead."""
     method = dict(method or {})
     names = _lightmapped(scene_name)
-    _our_lightmap(names, min(sizes), output / "warm", method)
+    try:
+        _our_lightmap(names, min(sizes), output / "warm", method)
+    except SettingsError:
+        pass  # the loop below says why
     rows = []
     for size in sizes:
-        page, seconds, timings = _our_lightmap(names, size, output / f"ours-{size}", method)
+        try:
+            page, seconds, timings = _our_lightmap(names, size, output / f"ours-{size}", method)
+        except SettingsError as error:  # e.g. over the memory a bake may use: said, and the rest kept
+            rows.append({"max_size": size, "refused": str(error)})
+            print(f"  lightmap cost {size}: refused: {error}", flush=True)
+            continue
         texels = int(page.covered.sum())
         rows.append({"max_size": size, "size": list(page.size), "texels": texels, "seconds": round(seconds, 3),
                      "microseconds_per_texel": round(1e6 * seconds / max(texels, 1), 2),
@@ -451,6 +461,9 @@ def cost_markdown(results) -> str:
     lines = ["| page | covered texels | seconds | µs per texel | largest stages (s) |",
              "| --- | ---: | ---: | ---: | --- |"]
     for r in results["cost"]["sizes"]:
+        if "refused" in r:
+            lines.append(f"| {r['max_size']} (max) | | | | refused: {r['refused']} |")
+            continue
         top = sorted(r["stages"].items(), key=lambda kv: -kv[1])[:3]
         lines.append(f"| {r['size'][0]}×{r['size'][1]} | {r['texels']} | {r['seconds']:.1f} | "
                      f"{r['microseconds_per_texel']:.1f} | {', '.join(f'{k} {v:.1f}' for k, v in top)} |")
@@ -462,7 +475,7 @@ def cost_plot(results, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    rows = results["cost"]["sizes"]
+    rows = [r for r in results["cost"]["sizes"] if "refused" not in r]
     texels = [r["texels"] for r in rows]
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.5))
     left.plot(texels, [r["seconds"] for r in rows], "r-s")

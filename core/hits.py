@@ -223,10 +223,10 @@ def nearest_table(bary: np.ndarray) -> np.ndarray:
     return d.argmin(axis=1).astype(np.int32)
 
 
-def _moved_mesh(s: Surfels, faces: np.ndarray, device: str) -> wp.Mesh:
-    """The BVH of the triangles ``faces`` (bool[T]) flags, on the points of ``s``'s BVH (shared,
-    not copied)."""
-    tris = s.tris.numpy().reshape(-1, 3)[faces]
+def _moved_mesh(s: Surfels, triangles: np.ndarray, faces: np.ndarray, device: str) -> wp.Mesh:
+    """The BVH of the ``triangles`` (int32[T,3], the scene's, on the host: no copy back from the
+    device) that ``faces`` (bool[T]) flags, on the points of ``s``'s BVH (shared, not copied)."""
+    tris = np.asarray(triangles, np.int32)[faces]
     return wp.Mesh(points=s.points, indices=wp.array(np.ascontiguousarray(tris.reshape(-1)), dtype=wp.int32,
                                                       device=device))
 
@@ -267,7 +267,7 @@ def trace(problem, rays: int, previous: Hits | None = None) -> Hits:
     m.face = wp.array(motion.faces.astype(np.int32) if reuse else np.zeros(0, np.int32), dtype=wp.int32, device=d)
     m.element = wp.array(motion.elements.astype(np.int32) if reuse else np.zeros(0, np.int32), dtype=wp.int32,
                          device=d)
-    moved = _moved_mesh(s, motion.faces, d) if reuse and motion.faces.any() else None
+    moved = _moved_mesh(s, problem.scene.triangles, motion.faces, d) if reuse and motion.faces.any() else None
     m.mesh = moved.id if moved is not None else 0
     m.any = int(moved is not None)
     corner = wp.array(np.ascontiguousarray(els.corner.reshape(-1), np.int32), dtype=wp.int32, device=d)

@@ -75,12 +75,13 @@ def test_accuracy_bench_lightmap_mode_places_our_page_on_cycles_curves(tmp_path)
 
 def test_accuracy_bench_cost_mode_times_our_page_per_texel_at_each_size(tmp_path):
     """--lightmap-cost: our Cornell page at two sizes, no Cycles; a larger page covers more texels
-    and each row's µs per texel is its seconds over its texels."""
+    and each row's µs per texel is its seconds over its texels; a page too large is refused."""
     accuracy = script("bench/accuracy.py")
-    assert accuracy.main(["--lightmap-cost", "32", "64", "--output", str(tmp_path)]) == 0
+    assert accuracy.main(["--lightmap-cost", "32", "64", "16384", "--output", str(tmp_path)]) == 0
     (json_path,) = tmp_path.glob("accuracy-lightmap-cost-cornell_box-*.json")
     rows = json.loads(json_path.read_text())["cost"]["sizes"]
-    assert [r["max_size"] for r in rows] == [32, 64]
+    # a page over the memory a bake may use is refused, said, and the other sizes kept
+    assert [r["max_size"] for r in rows] == [32, 64, 16384] and "memory" in rows.pop()["refused"]
     assert 0 < rows[0]["texels"] < rows[1]["texels"] and max(rows[1]["size"]) <= 64
     for r in rows:
         assert r["microseconds_per_texel"] == pytest.approx(1e6 * r["seconds"] / r["texels"], rel=0.01, abs=0.01)
