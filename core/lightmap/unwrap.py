@@ -17,6 +17,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional
@@ -29,6 +30,13 @@ from . import cache
 _WORKER = Path(__file__).with_name("_xatlas_worker.py")
 # Bump when the worker's output changes meaning, so stale cache entries are not used.
 _CACHE_VERSION = b"rb-unwrap-8"
+# xatlas now and then never returns (seen once in CI: a test's layout that takes 3 s here hung for
+# over an hour; xatlas-python's tracker has such reports too). A worker that outlives this many
+# seconds plus so many per triangle it was given is killed and started once more; a second hang
+# is an error. xatlas takes ~10-50 µs a triangle here, so the limit leaves a wide margin.
+WORKER_SECONDS = 120.0
+WORKER_SECONDS_PER_TRIANGLE = 1e-3
+WORKER_TRIES = 2
 
 
 @dataclass
@@ -191,7 +199,9 @@ def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path,
     (each job a mesh, or with ``names`` — {key: object names of its meshes} — a group of meshes
     packed together); {key: outputs}. The workers are killed when this ends by an exception (a
     failed worker, ``check`` raising, KeyboardInterrupt) and die with this process (see
-    ``_xatlas_worker._die_with_parent``)."""
+    ``_xatlas_worker._die_with_parent``). A worker past its time limit (``WORKER_SECONDS`` and
+    ``WORKER_SECONDS_PER_TRIANGLE``) is killed and started again, up to ``WORKER_TRIES`` times in
+    all, then BakeError."""
     whole = names is not None
     python = python or sys.executable
     keys = list(jobs)
@@ -219,15 +229,24 @@ def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path,
                         payload.update({f"m{j}_{name}": v for name, v in jobs[keys[k]].items()})
                 payload["groups" if whole else "meshes"] = np.array(len(members))
                 np.savez(path_in, **payload)
-                try:  # a session of its own: a terminal's Ctrl-C reaches the bake, which stops it
-                    proc = subprocess.Popen([python, str(_WORKER), command, str(path_in), str(path_out)],
-                                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                            text=True, start_new_session=True)
-                except OSError as exc:
-                    raise BakeError(f"cannot start the UV unwrapper with {python}: {exc}") from None
-                procs.append((proc, members, path_out))
-            for proc, members, path_out in procs:
-                stdout, stderr = _wait(proc, check)
+                limit = WORKER_SECONDS + WORKER_SECONDS_PER_TRIANGLE * sum(
+                    int(v.size) // 3 for name, v in payload.items() if name.endswith("idx"))
+                procs.append([_start(python, command, path_in, path_out, env), members, path_in, path_out, limit])
+            for entry in procs:
+                proc, members, path_in, path_out, limit = entry
+                for attempt in range(WORKER_TRIES):
+                    ended = _wait(proc, check, limit)
+                    if ended is not None:
+                        break
+                    proc.kill()
+                    proc.communicate()
+                    if attempt + 1 < WORKER_TRIES:
+                        proc = entry[0] = _start(python, command, path_in, path_out, env)
+                else:
+                    raise BakeError(f"UV unwrapping (xatlas) did not finish within {limit:.0f} s, "
+                                    f"{WORKER_TRIES} times, for {_who(members, keys, names)}: xatlas "
+                                    "hung; bake again")
+                stdout, stderr = ended
                 if proc.returncode != 0 or not path_out.is_file():
                     raise BakeError(_failure(stderr or stdout, proc.returncode, members, keys, names))
                 with np.load(path_out) as data:
@@ -236,18 +255,42 @@ def _run(command: str, jobs: dict, options: dict, python, cache_dir: Path,
                         out[keys[k]] = {name[len(prefix):]: data[name] for name in data.files
                                         if name.startswith(prefix)}
         finally:  # an error, a cancel, Ctrl-C: the workers stop with the bake
-            for proc, _, _ in procs:
+            for proc, *_ in procs:
                 if proc.poll() is None:
                     proc.kill()
                     proc.communicate()
     return out
 
 
-def _wait(proc: subprocess.Popen, check: Optional[Callable[[], None]]) -> tuple:
-    """(stdout, stderr) of ``proc`` once it ends; ``check`` (None: none) is called every 0.2 s
-    meanwhile and raises to stop waiting (a cancelled bake)."""
+def _start(python: str, command: str, path_in: Path, path_out: Path, env: dict) -> subprocess.Popen:
+    """Start one worker on ``path_in``, in a session of its own: a terminal's Ctrl-C reaches the
+    bake, which stops it."""
+    try:
+        return subprocess.Popen([python, str(_WORKER), command, str(path_in), str(path_out)],
+                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, start_new_session=True)
+    except OSError as exc:
+        raise BakeError(f"cannot start the UV unwrapper with {python}: {exc}") from None
+
+
+def _who(members: list, keys: list, names: Optional[dict]) -> str:
+    """The meshes of one worker's jobs for a message: their objects' names where ``names`` gives
+    them, else how many meshes."""
+    if names is None:
+        return f"{len(members)} mesh" + ("es" if len(members) != 1 else "")
+    return ", ".join(n for k in members for n in names[keys[k]])
+
+
+def _wait(proc: subprocess.Popen, check: Optional[Callable[[], None]], limit: float) -> Optional[tuple]:
+    """(stdout, stderr) of ``proc`` once it ends, None when it runs past ``limit`` seconds;
+    ``check`` (None: none) is called every 0.2 s meanwhile and raises to stop waiting (a cancelled
+    bake)."""
+    end = time.monotonic() + limit
     while True:
         try:
-            return proc.communicate(timeout=None if check is None else 0.2)
+            return proc.communicate(timeout=max(0.0, min(0.2, end - time.monotonic())))
         except subprocess.TimeoutExpired:
-            check()
+            if time.monotonic() >= end:
+                return None
+            if check is not None:
+                check()

@@ -277,3 +277,47 @@ def test_a_page_too_small_for_the_padding_names_the_mesh_and_the_padding_that_fi
     assert 1 <= padding < 4
     layout, = unwrap([meshes], max_size=16, padding=padding, many=many, cache_dir=tmp_path)
     assert all(max(size) <= 16 for size in layout.sizes)
+
+
+def _hanging_python(tmp_path, hangs: int) -> str:
+    """An interpreter for the workers whose first ``hangs`` runs never end (as xatlas now and then
+    does) and whose later runs are this Python's; each run leaves a line in ``runs``."""
+    import sys
+
+    script = tmp_path / "python"
+    script.write_text(f"#!/bin/sh\necho run >> {tmp_path / 'runs'}\n"
+                      f"if [ $(wc -l < {tmp_path / 'runs'}) -le {hangs} ]; then exec sleep 600; fi\n"
+                      f"exec {sys.executable} \"$@\"\n")
+    script.chmod(0o755)
+    return str(script)
+
+
+def test_a_worker_that_hangs_is_killed_and_started_again_and_its_layout_is_the_same(tmp_path, monkeypatch):
+    from radiosity_baker.core.lightmap import unwrap as module
+
+    monkeypatch.setattr(module, "WORKER_SECONDS", 2.0)
+    monkeypatch.setattr(module, "WORKER_SECONDS_PER_TRIANGLE", 0.0)
+    p, _, t = shapes.grid(1.0, 4)
+    mesh = [[ChartMesh("plane", p, t, 16.0)]]
+    expected, = unwrap(mesh, 64, 2, cache_dir=tmp_path / "a")
+    got, = unwrap(mesh, 64, 2, cache_dir=tmp_path / "b", python=_hanging_python(tmp_path, 1))
+    assert (tmp_path / "runs").read_text().count("run") == 3  # charts: hung, then again; pack
+    assert got.sizes == expected.sizes
+    np.testing.assert_array_equal(got.tri_uv[0], expected.tri_uv[0])
+
+
+def test_a_worker_that_hangs_every_time_is_an_error_naming_the_time_limit(tmp_path, monkeypatch):
+    import time
+
+    from radiosity_baker.core.lightmap import unwrap as module
+
+    monkeypatch.setattr(module, "WORKER_SECONDS", 1.0)
+    monkeypatch.setattr(module, "WORKER_SECONDS_PER_TRIANGLE", 0.0)
+    p, _, t = shapes.grid(1.0, 4)
+    start = time.monotonic()
+    with pytest.raises(BakeError, match=r"did not finish within 1 s, 2 times, for 1 mesh: xatlas hung"):
+        unwrap([[ChartMesh("plane", p, t, 16.0)]], 64, 2, cache_dir=tmp_path / "c",
+               python=_hanging_python(tmp_path, 10))
+    assert time.monotonic() - start < 30
+    assert (tmp_path / "runs").read_text().count("run") == 2
+    assert not list((tmp_path / "c").glob("rb-xatlas-*"))  # its temporary folder is gone
