@@ -38,7 +38,7 @@ _NO_DRIVER = "Could not find or load the NVIDIA CUDA driver"
 KERNEL_MODULES = ("direct", "hierarchy", "gather", "surfels", "hits", "enclosure", "refine",
                   "solvers.base", "solvers.reference", "links", "solvers.hierarchical",
                   "directions", "solvers.implicit", "solvers.antiradiance", "lightmap.raster",
-                  "targets.probes")
+                  "targets.probes", "emitter_weights")
 
 
 def init_warp() -> None:

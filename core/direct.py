@@ -484,6 +484,10 @@ def _leaf_transfer(g: Emitters, leaf: int, p: wp.vec3, n: wp.vec3) -> wp.vec3:
 # 2.2 %, 1.5 %, 1.2 % relative RMSE against Cycles; a receiver inside one closed emitter and
 # outside another pays for a smaller weight in noise.
 INNER_WEIGHT = wp.constant(1.0 / 64.0)
+# With weights shared by a group of receivers (``exact`` 2, see ``emitter_weights``), this share of
+# the samples is spread evenly over all emitters: a receiver that an emitter lights where the
+# group's point sees none of it still samples it (unbiased), at the cost of a few samples.
+SHARED_FLOOR = wp.constant(1.0 / 32.0)
 
 
 @wp.func
@@ -569,6 +573,22 @@ def _rotation(seed: int, leaf: int) -> wp.vec2:
 
 
 @wp.func
+def _place(c: float, lo: wp.float64, hi: wp.float64, total: float) -> wp.float64:
+    """Where cumulative weight ``c`` of a bucket's ``total`` falls in its interval [lo, hi] of u."""
+    if c < total:
+        return lo + (hi - lo) * wp.float64(c / total)
+    return hi
+
+
+@wp.func
+def _cumulative(k: int, count: int, r: wp.float64, lo: wp.float64, hi: wp.float64, total: float) -> float:
+    """A cumulative weight of a bucket (``total`` over [lo, hi] of u) that a leaf must reach to
+    hold stratified sample k (at u = (k + r)/count): just below where that sample falls."""
+    u = (wp.float64(k) + r) / wp.float64(count)
+    return float((u - lo) / (hi - lo)) * total * (1.0 - 1.0e-5)
+
+
+@wp.func
 def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.vec3, count: int,
               kb: int, ke: int, seed: int, shadows: int, exact: int, far: float,
               kept: wp.array2d(dtype=wp.float32), row: int):
@@ -587,7 +607,11 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     of the light (hidden sides of closed emissive surfaces weighed less, ``_leaf_light``); with
     ``row`` ≥ 0 the weights are kept in that row of ``kept`` (float32[receivers, leaves]) between
     the pass that sums them and the one that shares the samples out, which then weighs again
-    only the emitters that get samples (else every emitter is weighed twice). lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
+    only the emitters that get samples (else every emitter is weighed twice). ``exact`` 2: the
+    weights are row ``row`` of ``kept`` already (float32[groups, leaves + 1], the last column
+    their sum), weighed at a point standing for a group of receivers (``emitter_weights``), with
+    SHARED_FLOOR of the samples spread evenly; each emitter that gets samples is weighed at p
+    for its light. lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
     estimate's standard error from the spread of its samples, relative to it (or to NOISE_FLOOR of
     its unshadowed light where it is darker than that); 0 unshadowed. moment: mat33, rows R, G, B
     of Σ (each emitter's lighting / cosθ) × its direction (``moment_of``): where the light comes
@@ -656,21 +680,29 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
         light = wp.vec3(0.0)
         light_moment = wp.mat33(0.0)
         spots = int(0)
-        for j in range(leaves):
-            tj, wj, sj = _leaf_light(g, first + j, p, n, outside, shadows)
-            if j < BUCKET:
-                weights[j] = wj
-                red[j] = tj[0]
-                green[j] = tj[1]
-                blue[j] = tj[2]
-            elif row >= 0:
-                kept[row, first + j] = wj
-            if wj > 0.0:
-                total += wj
-                light += tj
-                if shadows == 0:
-                    light_moment += moment_of(tj, leaf_direction(g, first + j, p), n)
-                spots += sj
+        floor = float(0.0)
+        if exact == 2:
+            floor = 1.0 / float(leaves)  # the group's point sees none: every emitter alike
+            if kept[row, leaves] > 0.0:
+                floor = SHARED_FLOOR * kept[row, leaves] / float(leaves)
+            total = kept[row, leaves] + floor * float(leaves)
+            spots = 1  # sampled, never summed whole
+        else:  # the weights at p
+            for j in range(leaves):
+                tj, wj, sj = _leaf_light(g, first + j, p, n, outside, shadows)
+                if j < BUCKET:
+                    weights[j] = wj
+                    red[j] = tj[0]
+                    green[j] = tj[1]
+                    blue[j] = tj[2]
+                elif row >= 0:
+                    kept[row, first + j] = wj
+                if wj > 0.0:
+                    total += wj
+                    light += tj
+                    if shadows == 0:
+                        light_moment += moment_of(tj, leaf_direction(g, first + j, p), n)
+                    spots += sj
         if total <= 0.0:
             continue
         if shadows == 0 and spots == 0:
@@ -682,11 +714,18 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             moment += light_moment * share
             continue
         cum = float(0.0)
-        l0 = lo
+        # the next sample of ours, as a cumulative weight below which a leaf ends before it: the
+        # leaves in between get no sample and are passed over without placing them on u (with a
+        # margin, so a leaf that may hold a sample is always placed as before)
+        end = wp.min(_first_sample(hi, count, r), ke)
+        nxt = wp.max(_first_sample(lo, count, r), kb)
+        skip = _cumulative(nxt, count, r, lo, hi, total)
         for j in range(leaves):
             w = float(0.0)
             tj = wp.vec3(0.0)
-            if j < BUCKET:
+            if exact == 2:
+                w = kept[row, j] + floor
+            elif j < BUCKET:
                 w = weights[j]
                 tj = wp.vec3(red[j], green[j], blue[j])
             elif row >= 0:
@@ -695,17 +734,26 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
                 tj, w, sj = _leaf_light(g, first + j, p, n, outside, shadows)
             if w <= 0.0:
                 continue
+            before = cum
             cum += w
-            l1 = hi
-            if cum < total:
-                l1 = lo + (hi - lo) * wp.float64(cum / total)
+            if cum < skip:
+                continue
+            l0 = _place(before, lo, hi, total)
+            l1 = _place(cum, lo, hi, total)
             a = _first_sample(l0, count, r)
             b = _first_sample(l1, count, r)
             e0 = wp.max(a, kb)
             e1 = wp.min(b, ke)
+            nxt = wp.max(b, kb)
+            if nxt >= end:
+                skip = 2.0 * total  # no sample left: only this leaf's own, if any
+            else:
+                skip = _cumulative(nxt, count, r, lo, hi, total)
             if e0 < e1:
                 leaf = first + j
-                if j >= BUCKET and row >= 0:
+                if exact == 2:
+                    tj, wj, sj = _leaf_light(g, leaf, p, n, outside, shadows)
+                elif j >= BUCKET and row >= 0:
                     tj = _leaf_transfer(g, leaf, p, n)
                 i = t.leaf_index[leaf]
                 rot = _rotation(seed, leaf)
@@ -729,7 +777,6 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
                 sx += x * shadow * float(e1 - e0)
                 sxx += x * x * shadow * float(e1 - e0)
                 su += x * float(e1 - e0)
-            l0 = l1
     noise = float(0.0)
     if asked > 1.0 and su > 0.0:
         error = wp.sqrt(wp.max(sxx - sx * sx / asked, 0.0) / (asked * (asked - 1.0)))
@@ -770,14 +817,16 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
                    seed: int, first: int, exact: int, far: float, out: wp.array(dtype=wp.vec3),
                    rays: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
                    noise: wp.array(dtype=wp.float32), with_moments: int,
-                   moments: wp.array(dtype=wp.mat33), keep: int, kept: wp.array2d(dtype=wp.float32)):
+                   moments: wp.array(dtype=wp.mat33), keep: int, kept: wp.array2d(dtype=wp.float32),
+                   group: wp.array(dtype=wp.int32)):
     """Per receiver by ``mode``: FULL ``count`` shadowed samples; UNSHADOWED the same without
     shadows; PROBE one sample, the receiver's own of its tile's stratified set (tile_index of
     tile_count, seeded per tile); SKIP nothing (0). Receiver i's jitter is seeded by first + i (its
     index in the whole set). flags: 1 lit, 2 dark, 3 both; noise: relative standard error;
     moments (``with_moments`` 1): where the light comes from (see _estimate); keep 1: kept is
     float32[W, leaves] scratch for ``exact`` weights (see _estimate), receiver i in row i mod W,
-    each launch wave W receivers or fewer; keep 0: weigh twice."""
+    each launch wave W receivers or fewer; keep 0: weigh twice; ``exact`` 2: kept holds the
+    weights of groups of receivers, receiver i's in row group[i]."""
     i = wp.tid() + offset
     md = mode[i]
     if md == MODE_SKIP:
@@ -806,6 +855,8 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
     row = int(-1)
     if keep != 0:
         row = i % kept.shape[0]
+    if exact == 2:
+        row = group[i]
     value, nr, lit, dark, err, moment = _estimate(g, mesh, p, n, origin, total, kb, ke, s, shadows,
                                                   exact, far, kept, row)
     out[i] = value
@@ -819,7 +870,7 @@ def _direct_kernel(offset: int, mesh: wp.uint64, g: Emitters, points: wp.array(d
 def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray, mode: np.ndarray,
              count: int, seed: int, tiles=None, progress: Optional[Callable[[float], None]] = None,
              first: int = 0, whole: Optional[int] = None, with_moments: bool = False,
-             exact: Optional[bool] = None):
+             exact: Optional[bool] = None, shared=None):
     """One pass of the direct-light kernel over N receivers of ``problem``.
 
     points, normals: float32[N,3] (m, the problem's frame; unit); sizes: float32[N] local feature
@@ -829,7 +880,8 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     receivers' first in the whole set they are part of (a lightmap page baked alone), which seeds
     their jitter, and whole: that set's size (it decides exact emitter weighing), None: N — so a
     part gets the light the whole would; exact: whether every emitter is weighed exactly (None:
-    ``exact_selection``). Returns (float32[N,3]
+    ``exact_selection``); shared: an ``emitter_weights.Shared`` of these receivers, whose groups'
+    weights choose the emitters instead (``exact`` is then not looked at). Returns (float32[N,3]
     lighting, int64[N] rays, int32[N] flags: 1 some emitter was seen, 2 some was shadowed, 3 both;
     float32[N] noise: each estimate's standard error relative to it, see ``_estimate``), and with
     ``with_moments`` a fifth, float32[N,3,3]: per receiver rows R, G, B of the light's first moment
@@ -846,16 +898,19 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
     if tiles is None:
         tiles = (np.zeros(1, np.int32),) * 3
     tile_arrays = [wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=d) for a in tiles]
-    if exact is None:
+    if exact is None and shared is None:
         exact = exact_selection(problem, n if whole is None else whole)
     leaves = problem.lights.num_lamps + problem.lights.num_emitters
     # exact weights kept per receiver, for as many receivers per launch wave as KEPT_FLOATS allow
     chunks = max(1, min(32, n // 256))
-    keep = exact and leaves <= KEPT_FLOATS
+    keep = shared is None and exact and leaves <= KEPT_FLOATS
     if keep:
         chunks = max(chunks, -(-n * leaves // KEPT_FLOATS))
     wave = -(-n // max(1, min(chunks, n)))
     kept = wp.empty((wave, leaves) if keep else (1, 1), dtype=wp.float32, device=d)
+    group = wp.zeros(1, dtype=wp.int32, device=d)
+    if shared is not None:
+        kept, group, exact = shared.kept, shared.row, 2
     device_mod.launch(
         _direct_kernel, n,
         [problem.mesh.id, problem.lights.emitters,
@@ -864,7 +919,7 @@ def estimate(problem, points: np.ndarray, normals: np.ndarray, sizes: np.ndarray
          wp.array(np.ascontiguousarray(sizes, np.float32), dtype=wp.float32, device=d),
          wp.array(np.ascontiguousarray(mode, np.int32), dtype=wp.int32, device=d), int(count),
          *tile_arrays, int(seed), int(first), int(exact), problem.far, out, rays, flags, noise,
-         int(with_moments), moments, int(keep), kept],
+         int(with_moments), moments, int(keep), kept, group],
         dev, chunks=chunks, on_chunk=progress)
     result = (out.numpy().astype(np.float32), rays.numpy().astype(np.int64), flags.numpy(),
               noise.numpy())
