@@ -609,7 +609,8 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     the pass that sums them and the one that shares the samples out, which then weighs again
     only the emitters that get samples (else every emitter is weighed twice). ``exact`` 2: the
     weights are row ``row`` of ``kept`` already (float32[groups, leaves + 1], the last column
-    their sum), weighed at a point standing for a group of receivers (``emitter_weights``), with
+    their sum, or −1 where an emitter is too near the group for them: the light tree chooses
+    there), weighed at a point standing for a group of receivers (``emitter_weights``), with
     SHARED_FLOOR of the samples spread evenly; each emitter that gets samples is weighed at p
     for its light. lit / dark: 1 if some emitter's shadow was above 0 / below 1. noise: the
     estimate's standard error from the spread of its samples, relative to it (or to NOISE_FLOOR of
@@ -635,6 +636,10 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
     los = stack_f64()
     his = stack_f64()
     nodes[0] = t.root
+    if exact == 2:
+        if kept[row, kept.shape[1] - 1] < 0.0:
+            exact = 0  # an emitter too near for the group's weights to stand for p's: the tree's
+            row = -1
     if exact != 0:
         nodes[0] = ALL_LEAVES
     los[0] = wp.float64(0.0)
@@ -680,12 +685,12 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
         light = wp.vec3(0.0)
         light_moment = wp.mat33(0.0)
         spots = int(0)
-        floor = float(0.0)
+        even = float(0.0)
         if exact == 2:
-            floor = 1.0 / float(leaves)  # the group's point sees none: every emitter alike
+            even = 1.0 / float(leaves)  # the group's point sees none: every emitter alike
             if kept[row, leaves] > 0.0:
-                floor = SHARED_FLOOR * kept[row, leaves] / float(leaves)
-            total = kept[row, leaves] + floor * float(leaves)
+                even = SHARED_FLOOR * kept[row, leaves] / float(leaves)
+            total = kept[row, leaves] + even * float(leaves)
             spots = 1  # sampled, never summed whole
         else:  # the weights at p
             for j in range(leaves):
@@ -724,7 +729,7 @@ def _estimate(g: Emitters, mesh: wp.uint64, p: wp.vec3, n: wp.vec3, origin: wp.v
             w = float(0.0)
             tj = wp.vec3(0.0)
             if exact == 2:
-                w = kept[row, j] + floor
+                w = kept[row, j] + even
             elif j < BUCKET:
                 w = weights[j]
                 tj = wp.vec3(red[j], green[j], blue[j])

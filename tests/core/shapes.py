@@ -230,15 +230,15 @@ def crates(count=6):
     return sc, objects
 
 
-def floor_under_emissive_sphere(size: float, quads: int):
-    """A grey floor of side ``size`` (quads × quads) 1 mm under an emissive sphere of radius 0.3 m
+def floor_under_emissive_sphere(size: float, quads: int, gap: float = 0.001):
+    """A grey floor of side ``size`` (quads × quads) ``gap`` (m) under an emissive sphere of radius 0.3 m
     (320 triangles, radiance 1) and under a 4 m panel of radiance 10 at 3 m: where a light tree's
-    bounds under-rate the emitters right over a receiver. Returns (scene, floor positions,
+    bounds under-rate the emitters right over a receiver (at the default gap). Returns (scene, floor positions,
     floor triangles); the floor comes first."""
     p, n, t = grid(size, quads)
     q, m, u = icosphere(0.3, 2, inward=False)
     a, b, c = grid(4.0, 2, z=3.0, flip=True)
     sc = scene([(p, n, t, (0.5,) * 3, (0,) * 3),
-                (q + np.float32([0, 0, 0.301]), m, u, (0.0,) * 3, (1.0,) * 3),
+                (q + np.float32([0, 0, 0.3 + gap]), m, u, (0.0,) * 3, (1.0,) * 3),
                 (a, b, c, (0.0,) * 3, (10.0,) * 3)])
     return sc, p, t
