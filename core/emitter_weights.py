@@ -8,7 +8,8 @@ traced the whole shadow budget. Texels a few apart on one triangle see the emitt
 so a group of them shares one set of weights, weighed at its centroid (``direct._estimate`` with
 ``exact`` 2: each chosen emitter is still weighed at the texel for its light, and a share of the
 samples is spread over all emitters, so the estimate stays unbiased where the group's point is a
-poor stand-in).
+poor stand-in). A group near an emitter (REACH) keeps the light tree. On the 256 page at
+supersample 2: texel direct 9.0 s shared against 29.1 s with the tree, the same 1.5 % from exact.
 """
 from __future__ import annotations
 

@@ -17,8 +17,10 @@ The schedule works on each page's (supersampled) texel grid:
 
 Where weighing every emitter at every texel is too dear (``direct.exact_selection``), the texels
 of one triangle within a GROUP × GROUP square share exact weights (``core.emitter_weights``)
-instead of the light tree choosing for them: on the emissive room's 512 page the tree's estimates
-were noisy enough that 98 % of the texels traced the whole budget, shared weights left 5 %.
+instead of the light tree choosing for them (squares near an emitter keep the tree): on the
+emissive room's 512 page the tree's estimates were noisy enough that 98 % of the texels traced
+the whole budget; on its 256 page at supersample 2, texel direct 29.1 s with the tree, 9.0 s shared,
+both 1.5 % from weighing every texel exactly.
 
 What it can miss: a shadow too faint for a whole neighbourhood of probes (3 × 3 tiles, 144 rays)
 to see, covering a fraction f of the light everywhere there, with probability about (1 − f)^144.
